@@ -1,0 +1,102 @@
+//! Finding or installing the tools the browser tests need: the wasm32 target,
+//! wasm-bindgen-cli at exactly the Cargo.lock version, Chromium and chromedriver.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use anyhow::{Context, Result, bail};
+
+use crate::cmd;
+
+/// Paths of the tools a browser test run uses.
+#[derive(Debug, Clone)]
+pub struct BrowserTestTools {
+    pub wasm_bindgen_test_runner: PathBuf,
+    pub chromium: PathBuf,
+    pub chromedriver: PathBuf,
+}
+
+/// Ensures every tool is present (installing what it can) and returns their paths.
+pub fn ensure_browser_test_tools(root: &Path) -> Result<BrowserTestTools> {
+    ensure_wasm_target()?;
+    let wasm_bindgen_test_runner = ensure_wasm_bindgen_cli(root)?;
+    let (chromium, chromedriver) = ensure_chromium()?;
+    Ok(BrowserTestTools { wasm_bindgen_test_runner, chromium, chromedriver })
+}
+
+const WASM_TARGET: &str = "wasm32-unknown-unknown";
+
+fn ensure_wasm_target() -> Result<()> {
+    let installed = cmd::output(Command::new("rustup").args(["target", "list", "--installed"]))
+        .context("rustup is needed to add the wasm32 target")?;
+    if !installed.lines().any(|l| l.trim() == WASM_TARGET) {
+        cmd::run(Command::new("rustup").args(["target", "add", WASM_TARGET]))?;
+    }
+    Ok(())
+}
+
+/// The `wasm-bindgen` version pinned in Cargo.lock.
+pub fn locked_wasm_bindgen_version(root: &Path) -> Result<String> {
+    let lock = std::fs::read_to_string(root.join("Cargo.lock")).context("reading Cargo.lock")?;
+    let mut lines = lock.lines();
+    while let Some(line) = lines.next() {
+        if line.trim() == "name = \"wasm-bindgen\"" {
+            let version = lines.next().unwrap_or_default().trim();
+            if let Some(v) = version.strip_prefix("version = \"").and_then(|v| v.strip_suffix('"')) {
+                return Ok(v.to_string());
+            }
+        }
+    }
+    bail!("Cargo.lock has no wasm-bindgen package")
+}
+
+/// `wasm-bindgen-test-runner` matching Cargo.lock: from PATH if its version matches, else from
+/// the cache under `target/tools`, else installed there with `cargo install`.
+fn ensure_wasm_bindgen_cli(root: &Path) -> Result<PathBuf> {
+    let version = locked_wasm_bindgen_version(root)?;
+    let wanted = format!("wasm-bindgen {version}");
+    if cmd::output(Command::new("wasm-bindgen").arg("--version")).as_deref() == Some(wanted.as_str())
+        && let Some(path) = find_on_path("wasm-bindgen-test-runner")
+    {
+        return Ok(path);
+    }
+    let tools = root.join("target").join("tools").join(format!("wasm-bindgen-cli-{version}"));
+    let runner = tools.join("bin").join("wasm-bindgen-test-runner");
+    let cli = tools.join("bin").join("wasm-bindgen");
+    if runner.exists() && cmd::output(Command::new(&cli).arg("--version")).as_deref() == Some(wanted.as_str()) {
+        return Ok(runner);
+    }
+    eprintln!("installing wasm-bindgen-cli {version} into {} (takes several minutes, once)", tools.display());
+    // `--locked` fails for this CLI on crates.io today (a pinned dependency was yanked).
+    cmd::run(Command::new("cargo").args(["install", "wasm-bindgen-cli", "--version", &version, "--root"]).arg(&tools))?;
+    Ok(runner)
+}
+
+fn ensure_chromium() -> Result<(PathBuf, PathBuf)> {
+    let find = || (find_on_path("chromium").or_else(|| find_on_path("chromium-browser")), find_on_path("chromedriver"));
+    if let (Some(chromium), Some(driver)) = find() {
+        return Ok((chromium, driver));
+    }
+    let install = "apt-get update && apt-get install -y chromium chromium-driver";
+    if !is_root() {
+        bail!(
+            "Chromium and chromedriver are needed for the browser tests; install them with:\n    sudo sh -c '{install}'"
+        );
+    }
+    eprintln!("installing Debian chromium + chromium-driver");
+    cmd::run(Command::new("sh").args(["-c", &format!("DEBIAN_FRONTEND=noninteractive {install}")]))?;
+    match find() {
+        (Some(chromium), Some(driver)) => Ok((chromium, driver)),
+        _ => bail!("chromium/chromedriver still missing after `{install}`"),
+    }
+}
+
+fn is_root() -> bool {
+    cmd::output(Command::new("id").arg("-u")).as_deref() == Some("0")
+}
+
+/// First executable named `name` on PATH.
+pub fn find_on_path(name: &str) -> Option<PathBuf> {
+    let path = std::env::var_os("PATH")?;
+    std::env::split_paths(&path).map(|dir| dir.join(name)).find(|p| p.is_file())
+}

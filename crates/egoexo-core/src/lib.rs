@@ -28,6 +28,7 @@ pub mod camera;
 pub mod ego_features;
 pub mod exo_keypoints;
 pub mod metrics;
+pub mod motion;
 pub mod rays;
 pub mod region;
 pub mod rigid;
@@ -38,6 +39,7 @@ pub use camera::{CameraCalibration, CameraError, Fisheye624, Pinhole, Projection
 pub use ego_features::{EgoFeatureLayout, EgoTrajectories, TrackingMode};
 pub use exo_keypoints::{EXO_KEYPOINT_COUNT, ExoKeypoint, Keypoint2d};
 pub use metrics::{MetricsAccumulator, MotionMetrics};
+pub use motion::SmplMotion;
 pub use rays::{CanonicalRay, canonicalize_ray};
 pub use region::{BoundingBox, NotVisibleReason, RegionProposal, propose_region};
 pub use rigid::RigidTransform;

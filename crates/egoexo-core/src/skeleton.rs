@@ -123,6 +123,12 @@ pub const MEAN_SHAPE_REST_JOINTS: [[f32; 3]; NUM_JOINTS] = [
 /// shape is known; the ratio of stature to [`SmplSkeleton::head_height`] is what matters.
 pub const MEAN_SHAPE_STATURE_M: f32 = 1.70;
 
+/// Default position of the SMPL head joint in the head-device (CPF) frame, metres, for the mean
+/// shape: glasses sit about 9 cm in front of and 6 cm above the head joint (the head joint is
+/// near the top of the neck, between the ears). Used when a session does not calibrate it;
+/// the simulator places glasses with the same offset.
+pub const DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE: Vec3 = Vec3::new(0.0, -0.06, -0.09);
+
 /// Errors building a skeleton.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum SkeletonError {

@@ -1,0 +1,38 @@
+//! `egoexo`: the native command-line tool. Each subcommand lives in `commands/<name>.rs`
+//! with its own clap `Args` and a `run` function; errors are reported with `anyhow` here.
+
+mod commands;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(
+    name = "egoexo",
+    version,
+    about = "Full-body motion capture from head-mounted devices worn by two or more people"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Print a session's devices, time ranges, rates, observers, keypoint coverage and problems.
+    Inspect(commands::inspect::Args),
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let result: Result<()> = match cli.command {
+        Command::Inspect(args) => commands::inspect::run(args),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

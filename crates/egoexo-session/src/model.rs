@@ -1,0 +1,170 @@
+//! The in-memory session model: what every importer produces, what `.egoexo` stores, what the
+//! simulator writes and what reconstruction reads (after [`crate::align`]).
+//!
+//! Conventions: timestamps are nanoseconds on the session's one clock; poses are
+//! `T_world_device` in a Y-up world (metres); device frames are CPF (+X left, +Y up,
+//! +Z forward); cameras are OpenCV/Aria optical frames (see `egoexo_core::camera`).
+//! Importers convert from their source conventions (Aria: Z-up world, device = left SLAM
+//! camera, microseconds) into these before anything else sees the data.
+
+use egoexo_core::camera::CameraCalibration;
+use egoexo_core::exo_keypoints::{COCO17_COUNT, Keypoint2d};
+use egoexo_core::glam::Vec3;
+use egoexo_core::motion::SmplMotion;
+use egoexo_core::rigid::RigidTransform;
+use egoexo_core::skeleton::{DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE, NUM_JOINTS, SkeletonError, SmplSkeleton};
+use serde::{Deserialize, Serialize};
+
+/// A recording: one wearer, zero or more observers, subject info, optional ground truth.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Session {
+    /// Human-readable name (folder or file stem, or the simulator's clip id).
+    pub name: String,
+    pub wearer: Wearer,
+    pub observers: Vec<Observer>,
+    pub subject: SubjectInfo,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ground_truth: Option<GroundTruth>,
+}
+
+/// A device trajectory: strictly increasing timestamps with one `T_world_device` each.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Trajectory {
+    pub timestamps_ns: Vec<i64>,
+    pub poses: Vec<RigidTransform>,
+}
+
+impl Trajectory {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.timestamps_ns.len()
+    }
+
+    /// No samples.
+    pub fn is_empty(&self) -> bool {
+        self.timestamps_ns.is_empty()
+    }
+
+    /// `(first, last)` timestamp, if any.
+    pub fn time_range_ns(&self) -> Option<(i64, i64)> {
+        Some((*self.timestamps_ns.first()?, *self.timestamps_ns.last()?))
+    }
+}
+
+/// The person whose motion is reconstructed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Wearer {
+    /// Glasses (CPF frame).
+    pub head: Trajectory,
+    /// Left wrist device (3-point tracking).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub left_wrist: Option<Trajectory>,
+    /// Right wrist device (3-point tracking).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub right_wrist: Option<Trajectory>,
+    /// SMPL head joint in the head-device frame, metres (root recovery's offset).
+    #[serde(default = "default_head_joint_in_device")]
+    pub head_joint_in_device: Vec3,
+}
+
+fn default_head_joint_in_device() -> Vec3 {
+    DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE
+}
+
+impl Wearer {
+    /// Both wrist trajectories are present.
+    pub fn has_wrists(&self) -> bool {
+        self.left_wrist.is_some() && self.right_wrist.is_some()
+    }
+}
+
+/// A person whose glasses' RGB camera sees the wearer.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Observer {
+    /// Unique within the session (`"observer-1"`, an Aria serial, …).
+    pub id: String,
+    /// Glasses (CPF frame).
+    pub head: Trajectory,
+    /// The RGB camera: intrinsics, image size and `T_device_camera` (device = CPF).
+    pub camera: CameraCalibration,
+    /// 2D detections of the wearer in this observer's images.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub keypoints: Option<KeypointTrack>,
+    /// An exo video to run a detector on later (in the browser).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub video: Option<VideoRef>,
+    /// Optional per-frame image context features (the paper's DINOv3 CLS token).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub context_features: Option<ContextFeatureTrack>,
+}
+
+/// Per-frame COCO-17 detections (pixels in the observer's RGB image, scores in [0, 1]).
+/// A `None` keypoint was not detected.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct KeypointTrack {
+    pub timestamps_ns: Vec<i64>,
+    pub frames: Vec<[Option<Keypoint2d>; COCO17_COUNT]>,
+}
+
+/// A video file of an observer's RGB stream.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VideoRef {
+    /// Path relative to the session root.
+    pub path: String,
+    /// Session-clock timestamp of the video's first frame, nanoseconds.
+    pub start_ns: i64,
+}
+
+/// Per-frame context feature vectors, row-major `len × dim`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ContextFeatureTrack {
+    pub timestamps_ns: Vec<i64>,
+    pub dim: usize,
+    pub values: Vec<f32>,
+}
+
+/// What is known of the wearer's body.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SubjectInfo {
+    /// Stature (soles to top of head), metres.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub height_m: Option<f32>,
+    /// SMPL shape coefficients, when known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub betas: Option<Vec<f32>>,
+    /// Rest joints regressed from an SMPL model for `betas` (metres, SMPL body frame). Without
+    /// them, the mean shape scaled to `height_m` is used.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rest_joints: Option<[Vec3; NUM_JOINTS]>,
+}
+
+impl SubjectInfo {
+    /// The skeleton to reconstruct with: explicit rest joints, else the mean shape scaled to
+    /// the stature, else the mean shape.
+    pub fn skeleton(&self) -> Result<SmplSkeleton, SkeletonError> {
+        match (&self.rest_joints, self.height_m) {
+            (Some(joints), _) => SmplSkeleton::from_rest_joints(*joints),
+            (None, Some(h)) => SmplSkeleton::mean_shape_for_stature(h),
+            (None, None) => Ok(SmplSkeleton::mean_shape()),
+        }
+    }
+}
+
+/// Reference motion for evaluation and overlays.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GroundTruth {
+    /// The wearer's true SMPL motion.
+    pub motion: SmplMotion,
+    /// Which exo keypoints were occluded, per observer (simulated sessions label this).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub occlusion: Vec<ObserverOcclusion>,
+}
+
+/// Occlusion labels of one observer on the ground-truth motion's frames.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObserverOcclusion {
+    pub observer_id: String,
+    /// One mask per ground-truth frame: bit `k` set = exo keypoint `k` (network order, see
+    /// `egoexo_core::exo_keypoints::ExoKeypoint`) was occluded in this observer's view.
+    pub occluded: Vec<u16>,
+}

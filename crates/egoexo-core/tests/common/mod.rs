@@ -27,10 +27,10 @@ pub const ARIA_RGB_1408: [f32; 15] = [
 ];
 
 /// The RGB camera's pose on a CPF head device (+X left, +Y up, +Z forward): an OpenCV camera
-/// (+X right, +Y down) facing forward and tilted slightly down, mounted on the left temple.
+/// (+X right, +Y down) facing forward and tilted 11° down, mounted on the left temple.
 pub fn aria_rgb_t_device_camera() -> RigidTransform {
     RigidTransform::new(
-        Quat::from_rotation_z(std::f32::consts::PI) * Quat::from_rotation_x(0.2),
+        Quat::from_rotation_z(std::f32::consts::PI) * Quat::from_rotation_x(-0.2),
         Vec3::new(0.05, 0.012, 0.006),
     )
 }

@@ -12,13 +12,17 @@
 //! - [`validate`] — the session invariants; [`error`] — errors naming file, line/field and
 //!   what was expected.
 //! - [`align`] — every stream resampled onto one timeline.
+//! - [`bvh`] — a general BVH (Biovision hierarchy) reader and writer.
+//! - [`export`] — motion exporters: AMASS-style npz, BVH, glTF binary, joint-position CSV.
 //!
 //! Everything works on in-memory bytes so the browser's worker can use it; path helpers are
 //! native-only.
 
 pub mod align;
 pub mod aria;
+pub mod bvh;
 pub mod error;
+pub mod export;
 pub mod format;
 pub mod import;
 mod json;

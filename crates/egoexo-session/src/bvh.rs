@@ -1029,6 +1029,34 @@ Frame Time: 0.0333333
         }
     }
 
+    proptest::proptest! {
+        /// Random edits of a valid file (tokens dropped, replaced or duplicated, bytes
+        /// inserted) give a file or an error, never a panic.
+        #[test]
+        fn mutated_files_never_panic(
+            edits in proptest::collection::vec((0usize..200, 0usize..4, "[ -~\n\t]{0,6}"), 1..6)
+        ) {
+            let mut tokens: Vec<String> = TWO_JOINTS.split_inclusive(char::is_whitespace).map(str::to_string).collect();
+            for (at, kind, text) in edits {
+                let at = at % (tokens.len() + 1);
+                match kind {
+                    0 if at < tokens.len() => { tokens.remove(at); }
+                    1 if at < tokens.len() => tokens[at] = format!("{text} "),
+                    2 if at < tokens.len() => { let t = tokens[at].clone(); tokens.insert(at, t); }
+                    _ => tokens.insert(at, text),
+                }
+            }
+            let text = tokens.concat();
+            if let Ok(bvh) = Bvh::parse(&text) {
+                for frame in 0..bvh.num_frames() {
+                    proptest::prop_assert!(bvh.world_poses(frame).is_some());
+                }
+                let again = Bvh::parse(&bvh.to_bvh_string(9));
+                proptest::prop_assert!(again.is_ok(), "{:?}", again);
+            }
+        }
+    }
+
     #[test]
     fn new_rejects_what_cannot_be_written() {
         let joint = |name: &str, parent| BvhJoint {

@@ -926,6 +926,16 @@ Frame Time: 0.0333333
     }
 
     #[test]
+    fn reads_the_number_forms_real_files_use() {
+        let text = TWO_JOINTS
+            .replace("Frame Time: 0.0333333", "Frame Time: .0083333")
+            .replace("1 2 3 90 0 0 0 90 0", "1. +2 3e0 90 -0 .5 -.5 9.0E1 0");
+        let bvh = Bvh::parse(&text).unwrap();
+        assert!((bvh.frame_time_s() - 0.0083333).abs() < 1e-12);
+        assert_eq!(bvh.frame(1).unwrap(), [1.0, 2.0, 3.0, 90.0, 0.0, 0.5, -0.5, 90.0, 0.0]);
+    }
+
+    #[test]
     fn hierarchy_without_channels_and_zero_frames_is_fine() {
         let text = "HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\n}\nMOTION\nFrames: 0\nFrame Time: 0.1\n";
         let bvh = Bvh::parse(text).unwrap();

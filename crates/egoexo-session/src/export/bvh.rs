@@ -111,6 +111,13 @@ pub fn depth_first_order() -> [usize; NUM_JOINTS] {
 /// depth-first ([`depth_first_order`]), as BVH nests them.
 pub fn smpl_bvh(motion: &SmplMotion, unit: LengthUnit) -> Result<Bvh, ExportError> {
     validate(motion)?;
+    if motion.len() > crate::bvh::MAX_FRAMES {
+        return Err(ExportError::TooManyFrames {
+            format: super::Format::Bvh,
+            frames: motion.len(),
+            limit: crate::bvh::MAX_FRAMES,
+        });
+    }
     let scale = unit.per_metre();
     let to_file = |v: Vec3| v.as_dvec3() * scale;
     let skeleton = &motion.skeleton;

@@ -154,56 +154,85 @@ impl SubjectImporter {
         options: &ImportOptions,
     ) -> Result<TrialImport, ImportError> {
         let poses = self.parse_motion(amc_text, file)?;
-        let source_fps = entry.framerate;
-        let positions = self.joint_positions(&poses);
-        let min_frames = (options.min_segment_s * source_fps).ceil().max(2.0) as usize;
-        let segments = clean_segments(&positions, source_fps, options.max_joint_speed_mps, min_frames);
-        let limit = options.max_joint_speed_mps / source_fps;
-        let glitches = crate::clean::frame_steps(&positions).iter().filter(|&&s| s > limit).count();
-        if segments.is_empty() {
-            return Err(ImportError::NoCleanFrames {
-                file: file.to_owned(),
-                frames: poses.len(),
-                glitches,
-                min_s: options.min_segment_s,
-            });
-        }
-        let kept: usize = segments.iter().map(|r| r.len()).sum();
-        let mut clips = Vec::with_capacity(segments.len());
-        let mut fk = CmuBoneTransforms::default();
-        for (segment, range) in segments.iter().enumerate() {
-            let source = &poses[range.clone()];
-            let plan = resample_plan(source.len(), source_fps, options.fps);
-            let mut smpl_poses: Vec<SmplPose> = Vec::with_capacity(plan.len());
-            let mut errors = Vec::with_capacity(plan.len());
-            for (i, alpha) in plan {
-                if alpha == 0.0 {
-                    self.skeleton.forward_kinematics_into(&source[i], &mut fk);
-                } else {
-                    self.skeleton.forward_kinematics_into(&source[i].interpolate(&source[i + 1], alpha), &mut fk);
-                }
-                let frame = self.retargeter.retarget(&fk);
-                smpl_poses.push(frame.pose);
-                errors.push(frame.errors);
+        let source = TrialSource { subject: self.subject, trial, file, entry };
+        clips_from_source(&self.retargeter, &source, options, poses.len(), |i, alpha, out| {
+            if alpha == 0.0 {
+                self.skeleton.forward_kinematics_into(&poses[i], out);
+            } else {
+                self.skeleton.forward_kinematics_into(&poses[i].interpolate(&poses[i + 1], alpha), out);
             }
-            let (retarget, error_histogram) = retarget_stats(&errors);
-            let info = ClipInfo {
-                subject: self.subject,
-                trial,
-                name: format!("{:02}_{:02}", self.subject, trial),
-                segment: segment as u32,
-                description: entry.description.clone(),
-                source_fps,
-                source_frames: poses.len() as u32,
-                source_range: [range.start as u32, range.end as u32],
-                frames: smpl_poses.len() as u32,
-                frame_offset: 0,
-                head_height_m: self.retargeter.head_height(),
-                skeleton_scale: self.retargeter.scale(),
-                retarget,
-            };
-            clips.push(LibraryClip { info, poses: smpl_poses, error_histogram });
-        }
-        Ok(TrialImport { clips, source_frames: poses.len(), dropped_frames: poses.len() - kept, glitches })
+        })
     }
+}
+
+/// Which trial a source is, for clip metadata and errors.
+pub(crate) struct TrialSource<'a> {
+    pub subject: u32,
+    pub trial: u32,
+    pub file: &'a str,
+    pub entry: &'a CatalogEntry,
+}
+
+/// Corrupt-frame trimming, resampling, retargeting and error statistics for one trial of
+/// `frames` source frames, whatever its format. `fk_at(i, alpha, out)` writes the bone
+/// transforms of source time `i + alpha` (frames; `alpha` in `[0, 1)`, and `alpha = 0` for the
+/// last frame) in the retargeter's bone indexing.
+pub(crate) fn clips_from_source(
+    retargeter: &Retargeter,
+    source: &TrialSource<'_>,
+    options: &ImportOptions,
+    frames: usize,
+    mut fk_at: impl FnMut(usize, f32, &mut CmuBoneTransforms),
+) -> Result<TrialImport, ImportError> {
+    let source_fps = source.entry.framerate;
+    let mut fk = CmuBoneTransforms::default();
+    let positions: Vec<[Vec3; NUM_JOINTS]> = (0..frames)
+        .map(|i| {
+            fk_at(i, 0.0, &mut fk);
+            retargeter.joint_map().positions(&fk)
+        })
+        .collect();
+    let min_frames = (options.min_segment_s * source_fps).ceil().max(2.0) as usize;
+    let segments = clean_segments(&positions, source_fps, options.max_joint_speed_mps, min_frames);
+    let limit = options.max_joint_speed_mps / source_fps;
+    let glitches = crate::clean::frame_steps(&positions).iter().filter(|&&s| s > limit).count();
+    if segments.is_empty() {
+        return Err(ImportError::NoCleanFrames {
+            file: source.file.to_owned(),
+            frames,
+            glitches,
+            min_s: options.min_segment_s,
+        });
+    }
+    let kept: usize = segments.iter().map(|r| r.len()).sum();
+    let mut clips = Vec::with_capacity(segments.len());
+    for (segment, range) in segments.iter().enumerate() {
+        let plan = resample_plan(range.len(), source_fps, options.fps);
+        let mut smpl_poses: Vec<SmplPose> = Vec::with_capacity(plan.len());
+        let mut errors = Vec::with_capacity(plan.len());
+        for (i, alpha) in plan {
+            fk_at(range.start + i, alpha, &mut fk);
+            let frame = retargeter.retarget(&fk);
+            smpl_poses.push(frame.pose);
+            errors.push(frame.errors);
+        }
+        let (retarget, error_histogram) = retarget_stats(&errors);
+        let info = ClipInfo {
+            subject: source.subject,
+            trial: source.trial,
+            name: format!("{:02}_{:02}", source.subject, source.trial),
+            segment: segment as u32,
+            description: source.entry.description.clone(),
+            source_fps,
+            source_frames: frames as u32,
+            source_range: [range.start as u32, range.end as u32],
+            frames: smpl_poses.len() as u32,
+            frame_offset: 0,
+            head_height_m: retargeter.head_height(),
+            skeleton_scale: retargeter.scale(),
+            retarget,
+        };
+        clips.push(LibraryClip { info, poses: smpl_poses, error_histogram });
+    }
+    Ok(TrialImport { clips, source_frames: frames, dropped_frames: frames - kept, glitches })
 }

@@ -30,11 +30,18 @@ pub struct ImportOptions {
     pub max_joint_speed_mps: f32,
     /// Clean stretches shorter than this (seconds) are dropped.
     pub min_segment_s: f32,
+    /// Metres per BVH length unit; `None` infers it from the skeleton's head height.
+    pub bvh_metres_per_unit: Option<f64>,
 }
 
 impl Default for ImportOptions {
     fn default() -> Self {
-        Self { fps: LIBRARY_FPS, max_joint_speed_mps: DEFAULT_MAX_JOINT_SPEED_MPS, min_segment_s: 1.0 }
+        Self {
+            fps: LIBRARY_FPS,
+            max_joint_speed_mps: DEFAULT_MAX_JOINT_SPEED_MPS,
+            min_segment_s: 1.0,
+            bvh_metres_per_unit: None,
+        }
     }
 }
 
@@ -49,12 +56,16 @@ pub enum ImportError {
     Retarget { file: String, source: RetargetError },
     #[error("{file}: trial {subject:02}_{trial:02} is not in CMU_data.csv, so its capture rate is unknown")]
     NotInCatalog { file: String, subject: u32, trial: u32 },
-    #[error("{file}: expected a file named SUBJECT_TRIAL.amc (e.g. 05_06.amc) or SUBJECT.asf")]
+    #[error("{file}: expected a file named SUBJECT_TRIAL.amc/.bvh (e.g. 05_06.amc) or SUBJECT.asf")]
     FileName { file: String },
     #[error("{file}: no clean stretch of at least {min_s} s in {frames} frames ({glitches} glitches)")]
     NoCleanFrames { file: String, frames: usize, glitches: usize, min_s: f32 },
     #[error("{file}: {source}")]
     Library { file: String, source: LibraryError },
+    #[error("{file}: {source}")]
+    Bvh { file: String, source: egoexo_session::bvh::BvhError },
+    #[error("{file}: cannot use the BVH's length unit: {detail}; give the metres per unit")]
+    BvhUnit { file: String, detail: String },
     #[error("{path}: {source}")]
     Io { path: String, source: std::io::Error },
     #[error("{0}: no CMU subject folders (NN/NN.asf with NN_TT.amc) found")]

@@ -21,6 +21,7 @@ enum MocapCommand {
     ///
     /// DIR is searched for subject folders holding NN.asf and NN_TT.amc: the project's
     /// shared/data/cmu, or CMU's own allasfamc.zip unpacked (all_asfamc/subjects/NN/...).
+    /// Trials in BVH form (NN_TT.bvh, CMU joint names) are imported too.
     /// Capture rates and descriptions come from CMU_data.csv (found in DIR, or --catalog).
     Import(ImportArgs),
     /// Print a library's clips, subjects, hours and retarget error.
@@ -40,6 +41,10 @@ struct ImportArgs {
     /// Only these subjects (comma-separated CMU subject numbers, e.g. 2,5,105).
     #[arg(long, value_delimiter = ',')]
     subjects: Option<Vec<u32>>,
+    /// Metres per length unit of BVH trials (default: inferred from the skeleton's height;
+    /// CMU conversions use 0.056444, i.e. 1/0.45 inch).
+    #[arg(long)]
+    bvh_unit: Option<f64>,
 }
 
 #[derive(clap::Args)]
@@ -71,8 +76,8 @@ fn import(args: ImportArgs) -> Result<()> {
         .with_context(|| format!("no CMU_data.csv in {}; pass it with --catalog", args.dir.display()))?;
     let catalog = read_catalog(&catalog_path)?;
     if let Some(wanted) = &args.subjects {
-        let missing: Vec<u32> =
-            wanted.iter().copied().filter(|s| !tree.subjects.iter().any(|f| f.subject == *s)).collect();
+        let present = tree.subject_numbers();
+        let missing: Vec<u32> = wanted.iter().copied().filter(|s| !present.contains(s)).collect();
         if !missing.is_empty() {
             bail!("subjects {missing:?} are not in {}", args.dir.display());
         }
@@ -80,18 +85,14 @@ fn import(args: ImportArgs) -> Result<()> {
     for (path, why) in &tree.ignored {
         eprintln!("note: ignoring {}: {why}", path.display());
     }
-    let trials: usize = tree
-        .subjects
-        .iter()
-        .filter(|s| args.subjects.as_ref().is_none_or(|w| w.contains(&s.subject)))
-        .map(|s| s.trials.len())
-        .sum();
+    let trials = tree.trial_count_of(args.subjects.as_deref());
     let bar = ProgressBar::new(trials as u64);
     bar.set_style(
         ProgressStyle::with_template("{spinner} importing {bar:40} {pos}/{len} trials {elapsed} {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let result = import_tree(&tree, &catalog, &ImportOptions::default(), args.subjects.as_deref(), &|outcome| {
+    let options = ImportOptions { bvh_metres_per_unit: args.bvh_unit, ..ImportOptions::default() };
+    let result = import_tree(&tree, &catalog, &options, args.subjects.as_deref(), &|outcome| {
         bar.inc(1);
         if let Some(name) = outcome.path.file_name() {
             bar.set_message(name.to_string_lossy().into_owned());

@@ -11,24 +11,27 @@
 //!    positions of [`CMU_TO_SMPL`] (the mapping of `shared/data/cmu/README.md`).
 //! 2. The SMPL skeleton is the mean shape scaled uniformly so its head height matches the
 //!    subject's standing head height measured on the ASF ([`standing_head_height`]).
-//! 3. Initial fit down the kinematic chain, pelvis on the CMU root: a joint with one child
-//!    gets the CMU segment's world rotation (its twist), swung by the smallest rotation that
-//!    points the SMPL bone from the joint's *fitted* position at the child's target; the
-//!    pelvis and spine3 (three children each) get the least-squares rotation (Horn's
-//!    quaternion method) of their child bones onto the targets; the feet and head (no
-//!    child) take their CMU segment's rotation. CMU's rest legs splay about 20° while
-//!    SMPL's hang straight, so rest directions are aligned once per skeleton and Euler
-//!    angles are never copied.
-//! 4. Refinement ([`REFINE_ITERATIONS`] rounds): the translation moves by the mean residual
-//!    over all joints, then each body joint's rotation takes a damped Gauss–Newton step
-//!    that moves its whole subtree onto the targets. The mean shape's proportions differ
-//!    from a CMU subject's (its torso is longer, its thighs and forearms shorter), so no pose
-//!    puts every joint on its target; this spreads the mismatch over the body instead of
-//!    piling it on the limb ends. Measured on the shared subset: mean error 3.0 cm with the
-//!    pelvis pinned to the CMU root and the initial fit only, 2.6 cm after refinement. The
-//!    pelvis orientation (pelvis–hips–spine frame) and the head and feet orientations (the
-//!    CMU segments') are not changed by refinement, so the head-mounted device follows the
-//!    subject's real head.
+//! 3. The torso keeps SMPL's own shape and follows the CMU torso's rotations: spine1,
+//!    spine2, neck, collars, head and feet take their CMU segment's rotation since the rest
+//!    pose (`W`); the pelvis and spine3 take the least-squares rotation (Horn's quaternion
+//!    method) of their three child bones onto the CMU ones, relative to the same fit in the
+//!    rest pose. So a neutral CMU posture gives a neutral SMPL posture even though the two
+//!    skeletons place their joints differently (SMPL's neck joint sits ~5 cm behind its
+//!    head joint, its spine is curved, CMU's is straight).
+//! 4. The limbs (hips, knees, ankles, shoulders, elbows, wrists) are fitted to bone
+//!    directions: twist from the CMU segment, swung by the smallest rotation that aims the
+//!    SMPL bone from the joint's *fitted* position at the child's target. CMU's rest legs
+//!    splay about 20° while SMPL's hang straight, so rest directions are aligned once per
+//!    skeleton and Euler angles are never copied.
+//! 5. [`REFINE_ITERATIONS`] rounds: the translation moves by the mean residual over all
+//!    joints, then each limb joint takes a damped Gauss–Newton step that moves its limb
+//!    below it onto the targets, spreading a limb's length mismatch over its joints.
+//!
+//! Design note, measured on the shared subset (mean joint error): fitting every joint to
+//! positions reaches 2.6 cm but bends SMPL's spine and neck to make up for the skeletons'
+//! different joint placement (a neutral CMU T-pose came out with the neck bent ~80°);
+//! keeping the torso's shape gives 3.05 cm with natural postures. The remaining error is
+//! the shape difference (pelvis/hips/neck ~4–5 cm), not motion.
 //!
 //! The retarget error of a frame is the distance between each target and the fitted SMPL
 //! joint (forward kinematics of the output pose), over all 24 joints.
@@ -102,41 +105,43 @@ const TWIST_SEGMENT: [Option<&str>; NUM_JOINTS] = [
 /// How a joint's global rotation is found.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Fit {
-    /// Least squares over these three children.
+    /// Torso joints with three children (pelvis, spine3): the least-squares rotation of the
+    /// child bones onto the CMU targets, relative to the same fit in the rest pose.
     ThreeChildren([usize; 3]),
-    /// Twist from the CMU segment, swung to aim at this child.
+    /// Limb joints: twist from the CMU segment, swung to aim the bone at this child's
+    /// target from the joint's fitted position; refined afterwards.
     Aim(usize),
-    /// The CMU segment's rotation (no child to aim at).
+    /// The CMU segment's rotation since its rest pose (spine, neck, collars, head, feet).
     Segment,
     /// Same as the parent (SMPL hands: not part of the 21 body rotations).
     Parent,
 }
 
 const FIT: [Fit; NUM_JOINTS] = [
-    Fit::ThreeChildren([1, 2, 3]),
-    Fit::Aim(4),
-    Fit::Aim(5),
-    Fit::Aim(6),
-    Fit::Aim(7),
-    Fit::Aim(8),
-    Fit::Aim(9),
-    Fit::Aim(10),
-    Fit::Aim(11),
-    Fit::ThreeChildren([12, 13, 14]),
-    Fit::Segment,
-    Fit::Segment,
-    Fit::Aim(15),
-    Fit::Aim(16),
-    Fit::Aim(17),
-    Fit::Segment,
-    Fit::Aim(18),
-    Fit::Aim(19),
-    Fit::Aim(20),
-    Fit::Aim(21),
-    Fit::Aim(22),
-    Fit::Aim(23),
-    Fit::Parent,
-    Fit::Parent,
+    Fit::ThreeChildren([1, 2, 3]),    // pelvis
+    Fit::Aim(4),                      // left_hip
+    Fit::Aim(5),                      // right_hip
+    Fit::Segment,                     // spine1
+    Fit::Aim(7),                      // left_knee
+    Fit::Aim(8),                      // right_knee
+    Fit::Segment,                     // spine2
+    Fit::Aim(10),                     // left_ankle
+    Fit::Aim(11),                     // right_ankle
+    Fit::ThreeChildren([12, 13, 14]), // spine3
+    Fit::Segment,                     // left_foot
+    Fit::Segment,                     // right_foot
+    Fit::Segment,                     // neck
+    Fit::Segment,                     // left_collar
+    Fit::Segment,                     // right_collar
+    Fit::Segment,                     // head
+    Fit::Aim(18),                     // left_shoulder
+    Fit::Aim(19),                     // right_shoulder
+    Fit::Aim(20),                     // left_elbow
+    Fit::Aim(21),                     // right_elbow
+    Fit::Aim(22),                     // left_wrist
+    Fit::Aim(23),                     // right_wrist
+    Fit::Parent,                      // left_hand
+    Fit::Parent,                      // right_hand
 ];
 
 /// Errors setting up a retarget.
@@ -206,10 +211,14 @@ pub struct Retargeter {
     map: CmuJointMap,
     twist_segment: [Option<usize>; NUM_JOINTS],
     smpl: SmplSkeleton,
-    /// Per joint: rotation taking the SMPL rest bone direction (to the aimed child) onto the
-    /// CMU rest direction of the same bone, so `W_segment · rest_alignment` is a twist
-    /// candidate in SMPL terms.
+    /// Per joint, the rotation that turns a CMU segment rotation `W` (rest → now) into an
+    /// SMPL global rotation candidate `W · rest_alignment`: the rest facing for every joint,
+    /// and for limb joints also the swing from SMPL's rest bone direction onto CMU's (CMU's
+    /// rest legs splay about 20°).
     rest_alignment: [Quat; NUM_JOINTS],
+    /// For the three-children joints: the least-squares rotation of SMPL's rest child bones
+    /// onto CMU's rest child bones (the two skeletons' shape difference, removed per frame).
+    rest_fit: [Quat; NUM_JOINTS],
     head_height: f32,
     scale: f32,
     /// Per SMPL joint, every joint below it.
@@ -278,6 +287,13 @@ impl Retargeter {
                 }
             }
         }
+        let mut rest_fit = [Quat::IDENTITY; NUM_JOINTS];
+        for j in 0..NUM_JOINTS {
+            if let Fit::ThreeChildren(children) = FIT[j] {
+                let pairs = children.map(|c| (rest[c] - rest[j], rest_targets[c] - rest_targets[j]));
+                rest_fit[j] = best_rotation(&pairs).unwrap_or(facing);
+            }
+        }
         let descendants = std::array::from_fn(|j| {
             (j + 1..NUM_JOINTS)
                 .filter(|&d| {
@@ -289,7 +305,7 @@ impl Retargeter {
                 })
                 .collect()
         });
-        Ok(Self { map, twist_segment, smpl, rest_alignment, head_height, scale, descendants })
+        Ok(Self { map, twist_segment, smpl, rest_alignment, rest_fit, head_height, scale, descendants })
     }
 
     /// The scaled SMPL skeleton the poses drive.
@@ -341,17 +357,16 @@ impl Retargeter {
         p
     }
 
-    /// One sweep from the spine to the limb ends: each body joint's rotation is corrected by
-    /// a Gauss–Newton step of the rotation (about the joint) that best moves all its
-    /// descendants onto their targets, which spreads bone-length mismatches along a chain
-    /// instead of piling them on its end. Damping towards no correction keeps the CMU twist
-    /// where the descendants do not determine it (a straight limb). The feet and head keep
-    /// their CMU segment orientation.
+    /// One sweep down the limbs: each limb joint's rotation is corrected by a Gauss–Newton
+    /// step of the rotation (about the joint) that best moves the rest of its limb onto the
+    /// targets, which spreads a limb's length mismatch over its joints instead of piling it
+    /// on the hand or foot. Damping towards no correction keeps the CMU twist where the limb
+    /// does not determine it (a straight limb). Torso joints are not touched.
     fn refine(&self, global: &mut [Quat; NUM_JOINTS], pelvis: Vec3, targets: &[Vec3; NUM_JOINTS]) {
         let mut p = self.positions_from_globals(global, pelvis);
         for j in 1..=NUM_BODY_JOINTS {
             let descendants = &self.descendants[j];
-            if descendants.is_empty() || FIT[j] == Fit::Segment {
+            if descendants.is_empty() || !matches!(FIT[j], Fit::Aim(_)) {
                 continue;
             }
             // Minimise Σ |ω × a + a − b|² + μ|ω|² over the small rotation ω:
@@ -403,8 +418,13 @@ impl Retargeter {
             let segment = self.twist_segment[j].map(|b| fk.rotations[b]);
             global[j] = match FIT[j] {
                 Fit::ThreeChildren(children) => {
-                    let pairs = children.map(|c| (rest[c] - rest[j], targets[c] - position[j]));
-                    best_rotation(&pairs).or(segment.map(|w| w * self.rest_alignment[j])).unwrap_or(Quat::IDENTITY)
+                    // From the CMU joint, not the fitted one: the torso follows the CMU
+                    // torso and does not bend to make up for the skeletons' differences.
+                    let pairs = children.map(|c| (rest[c] - rest[j], targets[c] - targets[j]));
+                    match best_rotation(&pairs) {
+                        Some(fit) => (fit * self.rest_fit[j].conjugate() * self.rest_alignment[j]).normalize(),
+                        None => segment.unwrap_or(Quat::IDENTITY) * self.rest_alignment[j],
+                    }
                 }
                 Fit::Aim(c) => {
                     let candidate = (segment.unwrap_or(Quat::IDENTITY) * self.rest_alignment[j]).normalize();
@@ -424,7 +444,7 @@ impl Retargeter {
 }
 
 /// Rounds of moving the pelvis by the mean residual and refining the chains.
-pub const REFINE_ITERATIONS: usize = 20;
+pub const REFINE_ITERATIONS: usize = 12;
 
 /// Damping of a refinement step, m² (a 5 cm lever on each axis).
 const REFINE_DAMPING_M2: f32 = 0.0025;

@@ -28,9 +28,10 @@ pub struct Timeline {
 }
 
 impl Timeline {
-    /// Timestamp of frame `i`, nanoseconds.
+    /// Timestamp of frame `i`, nanoseconds (saturating at the ends of `i64`).
     pub fn timestamp_ns(&self, i: usize) -> i64 {
-        self.start_ns + (i as f64 * 1e9 / f64::from(self.fps)).round() as i64
+        let offset = (i as f64 * 1e9 / f64::from(self.fps)).round() as i64;
+        self.start_ns.saturating_add(offset)
     }
 }
 
@@ -327,8 +328,9 @@ fn resample_trajectory(trajectory: &Trajectory, times: &[i64], max_gap_ns: i64) 
         }
         let sample = match (i.checked_sub(1), ts.get(i)) {
             (_, Some(&exact)) if exact == t => trajectory.poses.get(i).copied(),
-            (Some(b), Some(&after)) if after - ts[b] <= max_gap_ns => {
-                let alpha = ((t - ts[b]) as f64 / (after - ts[b]) as f64) as f32;
+            (Some(b), Some(&after)) if i128::from(after) - i128::from(ts[b]) <= i128::from(max_gap_ns) => {
+                let alpha = ((i128::from(t) - i128::from(ts[b])) as f64
+                    / (i128::from(after) - i128::from(ts[b])) as f64) as f32;
                 match (trajectory.poses.get(b), trajectory.poses.get(i)) {
                     (Some(p0), Some(p1)) => Some(p0.interpolate(p1, alpha)),
                     _ => None,
@@ -496,6 +498,20 @@ mod tests {
         assert!(err.to_string().contains("over the limit of 10000000"));
         let empty = session(Trajectory::default());
         assert_eq!(align(&empty, &AlignOptions::default()), Err(AlignError::EmptyHead));
+    }
+
+    #[test]
+    fn extreme_timestamps_do_not_overflow() {
+        let mut s = session(trajectory(&[0, 1000]));
+        let head =
+            Trajectory { timestamps_ns: vec![i64::MIN + 1, 0, i64::MAX - 1], poses: vec![RigidTransform::IDENTITY; 3] };
+        s.observers.push(observer("o", head, &[0]));
+        let a = align(&s, &AlignOptions::default()).unwrap();
+        // Only frame 0 coincides with a sample; the rest lie in gaps of ~292 years.
+        let valid: Vec<usize> = (0..a.timeline.frames).filter(|&i| a.observers[0].head.valid[i]).collect();
+        assert_eq!(valid, [0]);
+        let far = Timeline { start_ns: i64::MAX - 5, fps: 1.0, frames: 3 };
+        assert_eq!(far.timestamp_ns(2), i64::MAX);
     }
 
     #[test]

@@ -167,8 +167,8 @@ pub fn validate_session(session: &Session) -> Result<Vec<ImportWarning>, ImportE
         c.trajectory(&traj, &observer.head)?;
         let range = observer.head.time_range_ns().unwrap_or_default();
         c.same_clock(&traj, range, "wearer.head", head_range)?;
-        let overlap = (range.1.min(head_range.1) - range.0.max(head_range.0)) as f64;
-        let head_span = (head_range.1 - head_range.0).max(1) as f64;
+        let overlap = (i128::from(range.1.min(head_range.1)) - i128::from(range.0.max(head_range.0))) as f64;
+        let head_span = (i128::from(head_range.1) - i128::from(head_range.0)).max(1) as f64;
         if overlap / head_span < 0.5 {
             c.warn(format!(
                 "observer `{}` is tracked during only {:.0}% of the wearer's recording",
@@ -307,7 +307,18 @@ pub fn validate_session(session: &Session) -> Result<Vec<ImportWarning>, ImportE
         if let Some(i) = motion.poses.iter().position(|p| !p.is_finite()) {
             return Err(c.invalid(format!("ground_truth.motion.poses[{i}]"), "a finite pose", "a non-finite value"));
         }
-        let last = motion.timestamp_ns(motion.len() - 1);
+        // The last frame's time, computed without overflow (start_ns comes from a file).
+        let span = ((motion.len() - 1) as f64 * 1e9 / f64::from(motion.fps)).round();
+        let last = i64::try_from(i128::from(motion.start_ns) + span as i128)
+            .ok()
+            .filter(|_| span.is_finite() && span < 9.2e18)
+            .ok_or_else(|| {
+                c.invalid(
+                    "ground_truth.motion.start_ns",
+                    "a motion whose frame times fit in i64 nanoseconds",
+                    format!("start {} ns, {} frames at {} fps", motion.start_ns, motion.len(), motion.fps),
+                )
+            })?;
         c.same_clock("ground_truth.motion", (motion.start_ns, last), "wearer.head", head_range)?;
         for (i, occlusion) in gt.occlusion.iter().enumerate() {
             let field = format!("ground_truth.occlusion[{i}]");

@@ -245,3 +245,46 @@ fn fixtures_convert_to_egoexo_and_back() {
         assert_sessions_equal(&imported.session, &folder);
     }
 }
+
+#[test]
+fn one_device_folder_and_zipped_folders_are_recognised() {
+    // The wearer's device folder alone: a session without observers.
+    let wearer: BTreeMap<String, Vec<u8>> = aria_fixture()
+        .into_iter()
+        .filter_map(|(p, b)| p.strip_prefix("wearer/").map(|p| (format!("slam/{p}"), b)))
+        .collect();
+    let single = import_session(&tree("glasses", wearer), &ImportOptions::default()).unwrap();
+    assert_eq!(single.source, SourceKind::AriaSingleDevice);
+    assert!(single.session.observers.is_empty());
+    assert_eq!(single.session.wearer.head.len(), 101);
+    // A zip whose files sit in one top-level folder (a zipped folder) is looked into, and the
+    // session is named after that folder.
+    let nested: BTreeMap<String, Vec<u8>> =
+        nymeria_fixture().into_iter().map(|(p, b)| (format!("my_sequence/{p}"), b)).collect();
+    let zip = egoexo_session::vfs::zip_files(&nested).unwrap();
+    let imported =
+        import_session(&FileTree::from_zip("upload.zip", zip, Limits::default()).unwrap(), &ImportOptions::default())
+            .unwrap();
+    assert_eq!(imported.source, SourceKind::Nymeria);
+    assert_eq!(imported.session.name, "my_sequence");
+    let messages: Vec<String> = imported.warnings.iter().map(ToString::to_string).collect();
+    assert!(
+        messages.iter().any(|m| m.starts_with("my_sequence/body/xdata_smpl_neutral.npz: no SMPL model")),
+        "{messages:#?}"
+    );
+}
+
+#[test]
+fn utc_clock_reads_utc_timestamps() {
+    let options = ImportOptions { clock: egoexo_session::aria::trajectory::Clock::Utc, ..ImportOptions::default() };
+    let mut files = aria_fixture();
+    // The JSON-lines keypoints carry session-clock times: with the UTC clock they are on
+    // another clock than the trajectories, and say so.
+    let err = import_session(&tree("aria", files.clone()), &options).unwrap_err();
+    assert!(err.to_string().contains("observers[0].keypoints.timestamps_ns`: mixed clocks"), "{err}");
+    files.remove("observers/observer-1/keypoints.jsonl");
+    let s = import_session(&tree("aria", files), &options).unwrap().session;
+    assert_eq!(s.wearer.head.timestamps_ns[0], START_NS + UTC_OFFSET_NS);
+    // COCO frames are timed from the observer trajectory, so they follow the chosen clock.
+    assert_eq!(s.observers[1].keypoints.as_ref().unwrap().timestamps_ns[0], START_NS + UTC_OFFSET_NS);
+}

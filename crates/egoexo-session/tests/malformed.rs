@@ -62,7 +62,12 @@ fn edit_json(files: &mut Files, path: &str, edit: impl FnOnce(&mut Value)) {
 
 /// Re-encodes the Nymeria SMPL npz after editing its arrays (name → (shape, values as f64 or i64)).
 fn edit_smpl(files: &mut Files, edit: impl FnOnce(&mut BTreeMap<String, (Vec<u64>, NpyData)>)) {
-    let npz = Npz::open("x", files[SMPL].clone(), Limits::default()).unwrap();
+    edit_npz(files, SMPL, edit);
+}
+
+/// Re-encodes an npz after editing its arrays.
+fn edit_npz(files: &mut Files, path: &str, edit: impl FnOnce(&mut BTreeMap<String, (Vec<u64>, NpyData)>)) {
+    let npz = Npz::open("x", files[path].clone(), Limits::default()).unwrap();
     let mut arrays: BTreeMap<String, (Vec<u64>, NpyData)> = npz
         .names()
         .into_iter()
@@ -80,7 +85,7 @@ fn edit_smpl(files: &mut Files, edit: impl FnOnce(&mut BTreeMap<String, (Vec<u64
             NpyData::Int(v) => w.add(name, shape, v).unwrap(),
         }
     }
-    files.insert(SMPL.into(), w.finish().unwrap());
+    files.insert(path.into(), w.finish().unwrap());
 }
 
 fn f64s<'a>(arrays: &'a mut BTreeMap<String, (Vec<u64>, NpyData)>, name: &str) -> (&'a mut Vec<u64>, &'a mut Vec<f64>) {
@@ -736,6 +741,26 @@ fn cases() -> Vec<Case> {
                 f.insert("ground_truth.npz".into(), w.finish().unwrap());
             }),
             expected: &["ground_truth.npz, field `translation`: expected shape (61, 3), got shape [61, 2]"],
+        },
+        Case {
+            name: "ground-truth start beyond the clock's range",
+            input: Egoexo(|f| edit_npz(f, "ground_truth.npz", |a| ints(a, "start_ns")[0] = i64::MAX - 10)),
+            expected: &[
+                "field `ground_truth.motion.start_ns`: expected a motion whose frame times fit in i64 nanoseconds",
+            ],
+        },
+        Case {
+            name: "ground-truth fps of zero",
+            input: Egoexo(|f| {
+                edit_npz(f, "ground_truth.npz", |a| {
+                    if let Some((_, NpyData::F32(v))) = a.get_mut("fps") {
+                        v[0] = 0.0;
+                    }
+                })
+            }),
+            expected: &[
+                "ground_truth.npz: expected a valid SMPL motion, got frame rate must be positive and finite, got 0",
+            ],
         },
         // ---- Nymeria ----------------------------------------------------------------------
         Case {

@@ -40,7 +40,7 @@ pub fn run(args: Args) -> Result<()> {
 
 /// Median sample rate, Hz (`None` with fewer than two samples).
 fn rate_hz(timestamps: &[i64]) -> Option<f64> {
-    let mut intervals: Vec<i64> = timestamps.windows(2).map(|w| w[1] - w[0]).collect();
+    let mut intervals: Vec<i128> = timestamps.windows(2).map(|w| i128::from(w[1]) - i128::from(w[0])).collect();
     if intervals.is_empty() {
         return None;
     }
@@ -48,8 +48,9 @@ fn rate_hz(timestamps: &[i64]) -> Option<f64> {
     Some(1e9 / intervals[intervals.len() / 2] as f64)
 }
 
-fn seconds(ns: i64) -> f64 {
-    ns as f64 / 1e9
+/// `a − b` in seconds (no overflow for any two timestamps).
+fn seconds(a: i64, b: i64) -> f64 {
+    (i128::from(a) - i128::from(b)) as f64 / 1e9
 }
 
 /// One line about a stream of timestamps, times relative to `origin`.
@@ -60,9 +61,9 @@ fn stream_line(count: usize, what: &str, timestamps: &[i64], origin: i64) -> Str
     let rate = rate_hz(timestamps).map_or("—".to_owned(), |r| format!("{r:.1} Hz"));
     format!(
         "{count} {what}, {:.3} s, {rate}, {:+.3} s .. {:+.3} s",
-        seconds(last - first),
-        seconds(first - origin),
-        seconds(last - origin)
+        seconds(last, first),
+        seconds(first, origin),
+        seconds(last, origin)
     )
 }
 
@@ -156,7 +157,7 @@ fn summary_text(args: &Args, imported: &Imported, aligned: &AlignedSession, prob
             }
         }
         if let Some(v) = &o.video {
-            let _ = writeln!(out, "  {:<12} video {} from {:+.3} s", "", v.path, seconds(v.start_ns - origin));
+            let _ = writeln!(out, "  {:<12} video {} from {:+.3} s", "", v.path, seconds(v.start_ns, origin));
         }
         if let Some(f) = &o.context_features {
             let _ = writeln!(out, "  {:<12} context features: {} × {}", "", f.timestamps_ns.len(), f.dim);
@@ -171,8 +172,8 @@ fn summary_text(args: &Args, imported: &Imported, aligned: &AlignedSession, prob
                 "\nGround truth: {} SMPL frames at {:.2} fps, {:+.3} s .. {:+.3} s; {}",
                 m.len(),
                 m.fps,
-                seconds(m.start_ns - origin),
-                seconds(last - origin),
+                seconds(m.start_ns, origin),
+                seconds(last, origin),
                 if gt.occlusion.is_empty() {
                     "no occlusion labels".to_owned()
                 } else {

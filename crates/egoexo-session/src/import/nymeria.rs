@@ -176,12 +176,12 @@ pub fn read_nymeria_smpl(file: &str, npz: &Npz) -> Result<(SmplMotion, Vec<Impor
             if ns < previous {
                 return Err(ImportError::new(file, at(), ImportErrorKind::NonMonotonicTimestamp { previous, got: ns }));
             }
-            if ns - previous > MAX_BODY_GAP_NS {
+            if i128::from(ns) - i128::from(previous) > i128::from(MAX_BODY_GAP_NS) {
                 return Err(ImportError::invalid(
                     file,
                     at(),
                     format!("body samples at most {} s apart", MAX_BODY_GAP_NS as f64 / 1e9),
-                    format!("a gap of {:.3} s", (ns - previous) as f64 / 1e9),
+                    format!("a gap of {:.3} s", (i128::from(ns) - i128::from(previous)) as f64 / 1e9),
                 ));
             }
         }

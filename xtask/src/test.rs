@@ -13,7 +13,7 @@ const WASM_TEST_CRATES: &[&str] = &["egoexo-core"];
 
 /// Single test targets (crate, test) that run compiled to wasm32 in headless Chromium, for
 /// crates whose other tests need native I/O.
-const WASM_TEST_TARGETS: &[(&str, &str)] = &[("egoexo-session", "export_wasm")];
+const WASM_TEST_TARGETS: &[(&str, &str)] = &[("egoexo-session", "export_wasm"), ("egoexo-session", "import_wasm")];
 
 /// Chromium flags for a closed network and a root user (see shared/notes/toolchain.md);
 /// wasm-bindgen-test-runner adds `headless` and `no-sandbox` itself.

@@ -1,4 +1,4 @@
-//! Time alignment: every stream of a [`Session`](crate::model::Session) resampled onto one
+//! Time alignment: every stream of a [`Session`] resampled onto one
 //! fixed-rate timeline — what reconstruction, the simulator's shards and the viewer consume.
 //!
 //! Conventions as in [`crate::model`]. Frame `i` of a [`Timeline`] is at

@@ -1,9 +1,9 @@
 //! Sessions in, motion out.
 //!
 //! - [`model`] — the in-memory session (wearer, observers, keypoints, subject, ground truth).
-//! - [`import`] — recognises an input and imports it: [`format`] (`.egoexo`), Nymeria, Aria
+//! - [`import`] — recognises an input and imports it: [`format`](mod@format) (`.egoexo`), Nymeria, Aria
 //!   MPS (one device or the multi-device layout); [`import::import_session`] is the entry.
-//! - [`format`] — the native `.egoexo` format: reader and writer (`docs/session-format.md`).
+//! - [`format`](mod@format) — the native `.egoexo` format: reader and writer (`docs/session-format.md`).
 //! - [`aria`] — Aria conventions and MPS files (`closed_loop_trajectory.csv`,
 //!   `online_calibration.jsonl`, `time_sync.csv`).
 //! - [`keypoints`] — exo keypoint files: JSON lines (read/write) and COCO JSON (read).
@@ -11,7 +11,7 @@
 //! - [`vfs`] — [`vfs::FileTree`]: in-memory files, zip archives, and (native) folders.
 //! - [`validate`] — the session invariants; [`error`] — errors naming file, line/field and
 //!   what was expected.
-//! - [`align`] — every stream resampled onto one timeline.
+//! - [`align`](mod@align) — every stream resampled onto one timeline.
 //! - [`bvh`] — a general BVH (Biovision hierarchy) reader and writer.
 //! - [`export`] — motion exporters: AMASS-style npz, BVH, glTF binary, joint-position CSV.
 //!

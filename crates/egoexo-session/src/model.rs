@@ -1,5 +1,5 @@
 //! The in-memory session model: what every importer produces, what `.egoexo` stores, what the
-//! simulator writes and what reconstruction reads (after [`crate::align`]).
+//! simulator writes and what reconstruction reads (after [`crate::align`](mod@crate::align)).
 //!
 //! Conventions: timestamps are nanoseconds on the session's one clock; poses are
 //! `T_world_device` in a Y-up world (metres); device frames are CPF (+X left, +Y up,

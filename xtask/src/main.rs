@@ -1,7 +1,9 @@
 //! `cargo xtask`: the project's build and test automation (the cargo xtask pattern).
 //!
 //! - `cargo xtask test` — installs what is missing (wasm target, wasm-bindgen-cli at the
-//!   Cargo.lock version, Chromium + chromedriver), runs the native tests of the workspace,
+//!   Cargo.lock version, Chromium + chromedriver, the Python venv `target/py` from
+//!   `tests/requirements.txt`, `tests/node_modules` from `tests/package-lock.json`), runs the
+//!   native tests of the workspace (with `EGOEXO_PYTHON` and `EGOEXO_NODE_MODULES` set),
 //!   then the browser tests (wasm-bindgen-test in headless Chromium), and prints the counts.
 
 mod cmd;
@@ -46,6 +48,9 @@ fn main() -> Result<()> {
             println!("wasm-bindgen-test-runner: {}", t.wasm_bindgen_test_runner.display());
             println!("chromium: {}", t.chromium.display());
             println!("chromedriver: {}", t.chromedriver.display());
+            let n = tools::ensure_native_test_tools(&root)?;
+            println!("python (venv, EGOEXO_PYTHON): {}", n.python.display());
+            println!("node_modules (EGOEXO_NODE_MODULES): {}", n.node_modules.display());
             Ok(())
         }
     }

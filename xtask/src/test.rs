@@ -26,9 +26,18 @@ const CHROMIUM_ARGS: &[&str] = &[
 pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
     // Install first, so a missing tool fails fast rather than after the native tests.
     let browser = if wasm { Some(tools::ensure_browser_test_tools(root)?) } else { None };
+    let native_tools = if native { Some(tools::ensure_native_test_tools(root)?) } else { None };
 
-    let native_counts =
-        if native { Some(cmd::run_tests(Command::new("cargo").args(["test", "--workspace"]))?) } else { None };
+    let native_counts = match &native_tools {
+        // The exporter tests read their files back with numpy, bvhio and gltf-validator.
+        Some(t) => Some(cmd::run_tests(
+            Command::new("cargo")
+                .args(["test", "--workspace"])
+                .env("EGOEXO_PYTHON", &t.python)
+                .env("EGOEXO_NODE_MODULES", &t.node_modules),
+        )?),
+        None => None,
+    };
 
     let wasm_counts = match &browser {
         Some(t) => {

@@ -100,3 +100,77 @@ pub fn find_on_path(name: &str) -> Option<PathBuf> {
     let path = std::env::var_os("PATH")?;
     std::env::split_paths(&path).map(|dir| dir.join(name)).find(|p| p.is_file())
 }
+
+/// Paths of the Python venv and the Node packages the native tests use.
+#[derive(Debug, Clone)]
+pub struct NativeTestTools {
+    /// The venv's interpreter (`target/py/bin/python`), with `tests/requirements.txt`.
+    pub python: PathBuf,
+    /// `tests/node_modules`, installed from `tests/package-lock.json`.
+    pub node_modules: PathBuf,
+}
+
+/// Ensures the Python venv and the Node packages are installed and current.
+pub fn ensure_native_test_tools(root: &Path) -> Result<NativeTestTools> {
+    let python = ensure_python_venv(root)?;
+    let node_modules = ensure_node_packages(root)?;
+    Ok(NativeTestTools { python, node_modules })
+}
+
+/// `target/py`, a venv with the pinned `tests/requirements.txt`; reinstalled when that file
+/// changes (a copy of what was installed is kept in the venv).
+fn ensure_python_venv(root: &Path) -> Result<PathBuf> {
+    let venv = root.join("target").join("py");
+    let python = venv.join("bin").join("python");
+    let requirements = root.join("tests").join("requirements.txt");
+    let wanted =
+        std::fs::read_to_string(&requirements).with_context(|| format!("reading {}", requirements.display()))?;
+    let stamp = venv.join("egoexo-requirements.txt");
+    if python.exists() && std::fs::read_to_string(&stamp).ok().as_deref() == Some(wanted.as_str()) {
+        return Ok(python);
+    }
+    if !python.exists() {
+        let make_venv = || cmd::run(Command::new("python3").args(["-m", "venv"]).arg(&venv));
+        if make_venv().is_err() {
+            // Debian's python3 needs python3-venv for `-m venv`.
+            apt_install("python3 python3-venv", "the Python test environment")?;
+            let _ = std::fs::remove_dir_all(&venv);
+            make_venv()?;
+        }
+    }
+    cmd::run(
+        Command::new(&python)
+            .args(["-m", "pip", "install", "--disable-pip-version-check", "-q", "-r"])
+            .arg(&requirements),
+    )?;
+    std::fs::write(&stamp, wanted)?;
+    Ok(python)
+}
+
+/// `tests/node_modules` from `tests/package-lock.json` (`npm ci`); reinstalled when the lock
+/// file changes.
+fn ensure_node_packages(root: &Path) -> Result<PathBuf> {
+    let dir = root.join("tests");
+    let node_modules = dir.join("node_modules");
+    let lock = std::fs::read_to_string(dir.join("package-lock.json")).context("reading tests/package-lock.json")?;
+    let stamp = node_modules.join(".egoexo-package-lock.json");
+    if std::fs::read_to_string(&stamp).ok().as_deref() == Some(lock.as_str()) {
+        return Ok(node_modules);
+    }
+    if find_on_path("npm").is_none() || find_on_path("node").is_none() {
+        apt_install("nodejs npm", "the Node test packages")?;
+    }
+    cmd::run(Command::new("npm").args(["ci", "--no-audit", "--no-fund"]).current_dir(&dir))?;
+    std::fs::write(&stamp, lock)?;
+    Ok(node_modules)
+}
+
+/// Installs Debian packages when running as root; otherwise says what to run.
+fn apt_install(packages: &str, purpose: &str) -> Result<()> {
+    let install = format!("apt-get update && apt-get install -y {packages}");
+    if !is_root() {
+        bail!("{purpose} needs Debian packages; install them with:\n    sudo sh -c '{install}'");
+    }
+    eprintln!("installing Debian {packages} for {purpose}");
+    cmd::run(Command::new("sh").args(["-c", &format!("DEBIAN_FRONTEND=noninteractive {install}")]))
+}

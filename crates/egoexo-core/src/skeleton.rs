@@ -197,6 +197,21 @@ impl SmplPose {
     pub fn is_finite(&self) -> bool {
         self.root_orientation.is_finite() && self.translation.is_finite() && self.body.iter().all(|q| q.is_finite())
     }
+
+    /// Interpolates from `self` (`alpha = 0`) to `other` (`alpha = 1`): every rotation (root and
+    /// the 21 local ones) by slerp along the shortest arc, the translation linearly. Used to
+    /// resample motions between frames.
+    pub fn interpolate(&self, other: &Self, alpha: f32) -> Self {
+        let mut body = self.body;
+        for (q, q_other) in body.iter_mut().zip(&other.body) {
+            *q = q.slerp(*q_other, alpha).normalize();
+        }
+        Self {
+            root_orientation: self.root_orientation.slerp(other.root_orientation, alpha).normalize(),
+            body,
+            translation: self.translation.lerp(other.translation, alpha),
+        }
+    }
 }
 
 impl SmplSkeleton {
@@ -326,6 +341,19 @@ mod tests {
     fn mean_shape_head_height_is_about_one_and_a_half_metres() {
         let h = SmplSkeleton::mean_shape().head_height();
         assert!((h - 1.50).abs() < 0.01, "{h}");
+    }
+
+    #[test]
+    fn pose_interpolation_endpoints_midpoint_and_short_arc() {
+        let a = SmplPose { root_orientation: Quat::from_rotation_y(0.2), ..SmplPose::rest() };
+        let mut b = SmplPose { root_orientation: -Quat::from_rotation_y(0.6), translation: Vec3::X, ..SmplPose::rest() };
+        b.body[3] = Quat::from_rotation_z(1.0);
+        let mid = a.interpolate(&b, 0.5);
+        assert!(crate::rotation::angle_between(mid.root_orientation, Quat::from_rotation_y(0.4)) < 1e-5);
+        assert!(crate::rotation::angle_between(mid.body[3], Quat::from_rotation_z(0.5)) < 1e-5);
+        assert!(mid.translation.abs_diff_eq(Vec3::new(0.5, 0.0, 0.0), 1e-6));
+        assert!(crate::rotation::angle_between(a.interpolate(&b, 0.0).root_orientation, a.root_orientation) < 1e-6);
+        assert!(crate::rotation::angle_between(a.interpolate(&b, 1.0).body[3], b.body[3]) < 1e-6);
     }
 
     #[test]

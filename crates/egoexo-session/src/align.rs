@@ -5,11 +5,13 @@
 //! `start_ns + round(i · 1e9 / fps)`.
 
 use egoexo_core::camera::CameraCalibration;
-use egoexo_core::exo_keypoints::{EXO_KEYPOINT_COUNT, Keypoint2d};
+use egoexo_core::exo_keypoints::{EXO_KEYPOINT_COUNT, Keypoint2d, exo_from_coco17};
 use egoexo_core::glam::Vec3;
 use egoexo_core::rigid::RigidTransform;
 use egoexo_core::skeleton::{SmplPose, SmplSkeleton};
 use serde::{Deserialize, Serialize};
+
+use crate::model::{Session, Trajectory};
 
 /// Default output rate, frames per second (the networks are trained at this rate).
 pub const DEFAULT_FPS: f32 = 30.0;
@@ -92,4 +94,249 @@ pub struct AlignedSession {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ground_truth: Option<AlignedGroundTruth>,
     pub coverage: Vec<StreamCoverage>,
+}
+
+/// Alignment choices.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AlignOptions {
+    /// Output rate, frames per second.
+    pub fps: f32,
+    /// Longest gap between two trajectory samples that interpolation bridges, nanoseconds.
+    /// Frames inside a longer gap are invalid.
+    pub max_gap_ns: i64,
+    /// Largest time difference between a frame and the keypoint detection (or context
+    /// feature) assigned to it, nanoseconds; `None` = half a frame period.
+    pub keypoint_tolerance_ns: Option<i64>,
+    /// Most frames a timeline may have (a guard against absurd time ranges).
+    pub max_frames: usize,
+}
+
+impl Default for AlignOptions {
+    /// 30 fps; gaps up to 100 ms bridged; keypoints within half a frame; at most 10 million
+    /// frames (~93 hours at 30 fps).
+    fn default() -> Self {
+        Self { fps: DEFAULT_FPS, max_gap_ns: DEFAULT_MAX_GAP_NS, keypoint_tolerance_ns: None, max_frames: 10_000_000 }
+    }
+}
+
+/// Default bridging limit: 100 ms (three frames at 30 fps).
+pub const DEFAULT_MAX_GAP_NS: i64 = 100_000_000;
+
+/// Why a session could not be aligned.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum AlignError {
+    #[error("frame rate must be in (0, 1000] fps, got {0}")]
+    InvalidFps(f32),
+    #[error("the bridging limit must be positive, got {0} ns")]
+    InvalidGap(i64),
+    #[error("the keypoint tolerance must be positive, got {0} ns")]
+    InvalidTolerance(i64),
+    #[error("the wearer's head trajectory is empty; it defines the timeline")]
+    EmptyHead,
+    #[error(
+        "the head trajectory spans {span_s:.1} s, which at {fps} fps is {frames} frames, over the limit of {limit}"
+    )]
+    TooManyFrames { span_s: f64, fps: f32, frames: u128, limit: usize },
+    #[error("the session is invalid: {0}")]
+    Invalid(#[from] crate::error::ImportError),
+}
+
+/// Resamples every stream of a session onto one timeline spanning the wearer's head
+/// trajectory (frame 0 at its first sample, the last frame at or before its last sample).
+///
+/// Trajectories: slerp + lerp ([`RigidTransform::interpolate`]) between the two samples around
+/// a frame when they are at most [`AlignOptions::max_gap_ns`] apart; frames outside a
+/// trajectory's range or inside a longer gap are invalid (identity pose). Keypoints: the
+/// detection nearest to the frame time within the tolerance, mapped to the K = 13 with
+/// `exo_from_coco17`; none otherwise (detections are never interpolated). Context features:
+/// likewise. Ground truth: per-joint slerp and translation lerp between its two frames
+/// around the time (its frames are regular, so every time inside its range is valid);
+/// occlusion masks from the nearest ground-truth frame. The session is validated first.
+pub fn align(session: &Session, options: &AlignOptions) -> Result<AlignedSession, AlignError> {
+    if !(options.fps.is_finite() && options.fps > 0.0 && options.fps <= 1000.0) {
+        return Err(AlignError::InvalidFps(options.fps));
+    }
+    if options.max_gap_ns <= 0 {
+        return Err(AlignError::InvalidGap(options.max_gap_ns));
+    }
+    let frame_ns = 1e9 / f64::from(options.fps);
+    let tolerance = options.keypoint_tolerance_ns.unwrap_or((frame_ns / 2.0).round() as i64);
+    if tolerance <= 0 {
+        return Err(AlignError::InvalidTolerance(tolerance));
+    }
+    let (first, last) = session.wearer.head.time_range_ns().ok_or(AlignError::EmptyHead)?;
+    crate::validate::validate_session(session)?;
+    let span = (last as i128 - first as i128) as f64;
+    let frames = (span / frame_ns).floor() as u128 + 1;
+    if frames > options.max_frames as u128 {
+        return Err(AlignError::TooManyFrames {
+            span_s: span / 1e9,
+            fps: options.fps,
+            frames,
+            limit: options.max_frames,
+        });
+    }
+    let timeline = Timeline { start_ns: first, fps: options.fps, frames: frames as usize };
+    let times: Vec<i64> = (0..timeline.frames).map(|i| timeline.timestamp_ns(i)).collect();
+
+    let mut coverage = Vec::new();
+    let mut cover = |stream: String, valid: usize| {
+        coverage.push(StreamCoverage { stream, valid_frames: valid, frames: timeline.frames })
+    };
+
+    let head = resample_trajectory(&session.wearer.head, &times, options.max_gap_ns);
+    cover("wearer/head".into(), count(&head.valid));
+    let left_wrist = session.wearer.left_wrist.as_ref().map(|t| resample_trajectory(t, &times, options.max_gap_ns));
+    let right_wrist = session.wearer.right_wrist.as_ref().map(|t| resample_trajectory(t, &times, options.max_gap_ns));
+    if let Some(w) = &left_wrist {
+        cover("wearer/left_wrist".into(), count(&w.valid));
+    }
+    if let Some(w) = &right_wrist {
+        cover("wearer/right_wrist".into(), count(&w.valid));
+    }
+
+    let mut observers = Vec::with_capacity(session.observers.len());
+    for observer in &session.observers {
+        let head = resample_trajectory(&observer.head, &times, options.max_gap_ns);
+        cover(format!("{}/head", observer.id), count(&head.valid));
+        let keypoints: Vec<[Option<Keypoint2d>; EXO_KEYPOINT_COUNT]> = match &observer.keypoints {
+            Some(track) => times
+                .iter()
+                .map(|&t| match nearest(&track.timestamps_ns, t, tolerance) {
+                    Some(i) => track.frames.get(i).map_or([None; EXO_KEYPOINT_COUNT], exo_from_coco17),
+                    None => [None; EXO_KEYPOINT_COUNT],
+                })
+                .collect(),
+            None => vec![[None; EXO_KEYPOINT_COUNT]; timeline.frames],
+        };
+        if observer.keypoints.is_some() {
+            cover(
+                format!("{}/keypoints", observer.id),
+                keypoints.iter().filter(|f| f.iter().any(Option::is_some)).count(),
+            );
+        }
+        let context_features = observer.context_features.as_ref().map(|track| {
+            times
+                .iter()
+                .map(|&t| {
+                    let i = nearest(&track.timestamps_ns, t, tolerance)?;
+                    track.values.get(i * track.dim..(i + 1) * track.dim).map(<[f32]>::to_vec)
+                })
+                .collect::<Vec<_>>()
+        });
+        if let Some(f) = &context_features {
+            cover(format!("{}/context_features", observer.id), f.iter().filter(|v| v.is_some()).count());
+        }
+        observers.push(AlignedObserver {
+            id: observer.id.clone(),
+            camera: observer.camera,
+            head,
+            keypoints,
+            context_features,
+        });
+    }
+
+    let ground_truth = session.ground_truth.as_ref().map(|gt| {
+        let motion = &gt.motion;
+        let mut poses = Vec::with_capacity(timeline.frames);
+        let mut valid = Vec::with_capacity(timeline.frames);
+        let mut nearest_frame = Vec::with_capacity(timeline.frames);
+        let n = motion.len();
+        for &t in &times {
+            let x = (t as i128 - motion.start_ns as i128) as f64 * f64::from(motion.fps) / 1e9;
+            if n == 0 || x < -1e-6 || x > (n - 1) as f64 + 1e-6 {
+                poses.push(SmplPose::rest());
+                valid.push(false);
+                nearest_frame.push(None);
+                continue;
+            }
+            let x = x.clamp(0.0, (n - 1) as f64);
+            let i = (x.floor() as usize).min(n - 1);
+            let j = (i + 1).min(n - 1);
+            let alpha = (x - i as f64) as f32;
+            poses.push(motion.poses[i].interpolate(&motion.poses[j], alpha));
+            valid.push(true);
+            nearest_frame.push(Some(if alpha < 0.5 { i } else { j }));
+        }
+        let occluded = session
+            .observers
+            .iter()
+            .map(|o| match gt.occlusion.iter().find(|occ| occ.observer_id == o.id) {
+                Some(occ) => {
+                    nearest_frame.iter().map(|f| f.and_then(|f| occ.occluded.get(f).copied()).unwrap_or(0)).collect()
+                }
+                None => vec![0; timeline.frames],
+            })
+            .collect();
+        AlignedGroundTruth { poses, valid, occluded }
+    });
+    if let Some(gt) = &ground_truth {
+        cover("ground_truth".into(), count(&gt.valid));
+    }
+
+    let skeleton = session.subject.skeleton().map_err(|e| {
+        crate::error::ImportError::invalid(
+            &session.name,
+            crate::error::Location::Field("subject".into()),
+            "a valid skeleton",
+            e.to_string(),
+        )
+    })?;
+    Ok(AlignedSession {
+        name: session.name.clone(),
+        timeline,
+        head,
+        left_wrist,
+        right_wrist,
+        observers,
+        skeleton,
+        head_joint_in_device: session.wearer.head_joint_in_device,
+        ground_truth,
+        coverage,
+    })
+}
+
+fn count(valid: &[bool]) -> usize {
+    valid.iter().filter(|&&v| v).count()
+}
+
+/// Index of the timestamp nearest to `t` within `tolerance` (ties: the earlier one).
+fn nearest(timestamps: &[i64], t: i64, tolerance: i64) -> Option<usize> {
+    let i = timestamps.partition_point(|&x| x < t);
+    let before = i.checked_sub(1).map(|j| (j, t.abs_diff(timestamps[j])));
+    let after = timestamps.get(i).map(|&x| (i, x.abs_diff(t)));
+    let best = match (before, after) {
+        (Some(b), Some(a)) => Some(if a.1 < b.1 { a } else { b }),
+        (b, a) => b.or(a),
+    }?;
+    (best.1 <= tolerance as u64).then_some(best.0)
+}
+
+/// Samples a trajectory at `times` (sorted): interpolation between the bracketing samples when
+/// they are at most `max_gap_ns` apart, an exact sample when a time coincides with one.
+fn resample_trajectory(trajectory: &Trajectory, times: &[i64], max_gap_ns: i64) -> AlignedTrajectory {
+    let ts = &trajectory.timestamps_ns;
+    let mut poses = Vec::with_capacity(times.len());
+    let mut valid = Vec::with_capacity(times.len());
+    let mut i = 0;
+    for &t in times {
+        // First sample at or after t.
+        while i < ts.len() && ts[i] < t {
+            i += 1;
+        }
+        let sample = match (i.checked_sub(1), ts.get(i)) {
+            (_, Some(&exact)) if exact == t => trajectory.poses.get(i).copied(),
+            (Some(b), Some(&after)) if after - ts[b] <= max_gap_ns => {
+                let alpha = ((t - ts[b]) as f64 / (after - ts[b]) as f64) as f32;
+                match (trajectory.poses.get(b), trajectory.poses.get(i)) {
+                    (Some(p0), Some(p1)) => Some(p0.interpolate(p1, alpha)),
+                    _ => None,
+                }
+            }
+            _ => None,
+        };
+        valid.push(sample.is_some());
+        poses.push(sample.unwrap_or(RigidTransform::IDENTITY));
+    }
+    AlignedTrajectory { poses, valid }
 }

@@ -1,0 +1,209 @@
+//! From ASF/AMC text to library clips: parse, CMU forward kinematics, corrupt-frame
+//! trimming, resampling to the library rate, retargeting, error statistics. No I/O.
+
+use egoexo_core::glam::Vec3;
+use egoexo_core::skeleton::{NUM_JOINTS, SmplPose};
+use thiserror::Error;
+
+use crate::amc::AmcMotion;
+use crate::asf::AsfSkeleton;
+use crate::catalog::CatalogEntry;
+use crate::clean::{DEFAULT_MAX_JOINT_SPEED_MPS, clean_segments, resample_plan};
+use crate::error::ParseError;
+use crate::kinematics::{CmuBoneTransforms, CmuPose, CmuSkeleton, KinematicsError};
+use crate::library::{ClipInfo, LibraryClip, LibraryError, retarget_stats};
+use crate::retarget::{RetargetError, Retargeter};
+
+/// Frame rate of the motion library, frames per second.
+pub const LIBRARY_FPS: f32 = 30.0;
+
+/// Credit line stored in every library built from CMU data.
+pub const CMU_SOURCE: &str = "The data used in this project was obtained from mocap.cs.cmu.edu. \
+     The database was created with funding from NSF EIA-0196217.";
+
+/// Settings of an import.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImportOptions {
+    /// Output rate, frames per second.
+    pub fps: f32,
+    /// A frame-to-frame joint step faster than this (m/s) is a glitch.
+    pub max_joint_speed_mps: f32,
+    /// Clean stretches shorter than this (seconds) are dropped.
+    pub min_segment_s: f32,
+}
+
+impl Default for ImportOptions {
+    fn default() -> Self {
+        Self { fps: LIBRARY_FPS, max_joint_speed_mps: DEFAULT_MAX_JOINT_SPEED_MPS, min_segment_s: 1.0 }
+    }
+}
+
+/// Errors importing CMU data.
+#[derive(Debug, Error)]
+pub enum ImportError {
+    #[error(transparent)]
+    Parse(#[from] ParseError),
+    #[error("{file}: {source}")]
+    Kinematics { file: String, source: KinematicsError },
+    #[error("{file}: {source}")]
+    Retarget { file: String, source: RetargetError },
+    #[error("{file}: trial {subject:02}_{trial:02} is not in CMU_data.csv, so its capture rate is unknown")]
+    NotInCatalog { file: String, subject: u32, trial: u32 },
+    #[error("{file}: expected a file named SUBJECT_TRIAL.amc (e.g. 05_06.amc) or SUBJECT.asf")]
+    FileName { file: String },
+    #[error("{file}: no clean stretch of at least {min_s} s in {frames} frames ({glitches} glitches)")]
+    NoCleanFrames { file: String, frames: usize, glitches: usize, min_s: f32 },
+    #[error("{file}: {source}")]
+    Library { file: String, source: LibraryError },
+    #[error("{path}: {source}")]
+    Io { path: String, source: std::io::Error },
+    #[error("{0}: no CMU subject folders (NN/NN.asf with NN_TT.amc) found")]
+    EmptyTree(String),
+    #[error("{0}: no CMU_data.csv found in the tree; pass the catalogue's path")]
+    NoCatalog(String),
+}
+
+/// `"05_06"` → `(5, 6)`.
+pub fn parse_trial_name(stem: &str) -> Option<(u32, u32)> {
+    let (subject, trial) = stem.split_once('_')?;
+    Some((subject.parse().ok()?, trial.parse().ok()?))
+}
+
+/// The result of importing one trial.
+#[derive(Clone, Debug)]
+pub struct TrialImport {
+    /// One clip per clean stretch, in time order.
+    pub clips: Vec<LibraryClip>,
+    /// Frames in the source.
+    pub source_frames: usize,
+    /// Source frames in no clip (glitches and stretches too short).
+    pub dropped_frames: usize,
+    /// Number of glitch steps found.
+    pub glitches: usize,
+}
+
+/// Imports the trials of one CMU subject (one ASF skeleton).
+#[derive(Clone, Debug)]
+pub struct SubjectImporter {
+    subject: u32,
+    asf: AsfSkeleton,
+    skeleton: CmuSkeleton,
+    retargeter: Retargeter,
+}
+
+impl SubjectImporter {
+    /// Parses and prepares a subject's skeleton. `file` names the ASF in errors.
+    pub fn new(subject: u32, asf_text: &str, file: &str) -> Result<Self, ImportError> {
+        let asf = AsfSkeleton::parse(asf_text, file)?;
+        let skeleton =
+            CmuSkeleton::from_asf(&asf).map_err(|source| ImportError::Kinematics { file: file.to_owned(), source })?;
+        let retargeter =
+            Retargeter::new(&skeleton).map_err(|source| ImportError::Retarget { file: file.to_owned(), source })?;
+        Ok(Self { subject, asf, skeleton, retargeter })
+    }
+
+    /// The CMU subject number.
+    pub fn subject(&self) -> u32 {
+        self.subject
+    }
+
+    /// The parsed ASF.
+    pub fn asf(&self) -> &AsfSkeleton {
+        &self.asf
+    }
+
+    /// The kinematic CMU skeleton.
+    pub fn cmu_skeleton(&self) -> &CmuSkeleton {
+        &self.skeleton
+    }
+
+    /// The retargeter (scaled SMPL skeleton, head height, joint map).
+    pub fn retargeter(&self) -> &Retargeter {
+        &self.retargeter
+    }
+
+    /// Parses an AMC and returns its per-frame CMU poses.
+    pub fn parse_motion(&self, amc_text: &str, file: &str) -> Result<Vec<CmuPose>, ImportError> {
+        let amc = AmcMotion::parse(amc_text, file, &self.asf)?;
+        (0..amc.frame_count())
+            .map(|f| self.skeleton.pose_from_frame(amc.frame(f), amc.angle_unit))
+            .collect::<Result<_, _>>()
+            .map_err(|source| ImportError::Kinematics { file: file.to_owned(), source })
+    }
+
+    /// Mapped SMPL joint positions (metres) of each CMU pose.
+    pub fn joint_positions(&self, poses: &[CmuPose]) -> Vec<[Vec3; NUM_JOINTS]> {
+        let mut fk = CmuBoneTransforms::default();
+        poses
+            .iter()
+            .map(|p| {
+                self.skeleton.forward_kinematics_into(p, &mut fk);
+                self.retargeter.joint_map().positions(&fk)
+            })
+            .collect()
+    }
+
+    /// Imports one trial: `amc_text` is the AMC, `file` its name in errors, `entry` its
+    /// catalogue entry (description, true capture rate).
+    pub fn import_trial(
+        &self,
+        trial: u32,
+        amc_text: &str,
+        file: &str,
+        entry: &CatalogEntry,
+        options: &ImportOptions,
+    ) -> Result<TrialImport, ImportError> {
+        let poses = self.parse_motion(amc_text, file)?;
+        let source_fps = entry.framerate;
+        let positions = self.joint_positions(&poses);
+        let min_frames = (options.min_segment_s * source_fps).ceil().max(2.0) as usize;
+        let segments = clean_segments(&positions, source_fps, options.max_joint_speed_mps, min_frames);
+        let limit = options.max_joint_speed_mps / source_fps;
+        let glitches = crate::clean::frame_steps(&positions).iter().filter(|&&s| s > limit).count();
+        if segments.is_empty() {
+            return Err(ImportError::NoCleanFrames {
+                file: file.to_owned(),
+                frames: poses.len(),
+                glitches,
+                min_s: options.min_segment_s,
+            });
+        }
+        let kept: usize = segments.iter().map(|r| r.len()).sum();
+        let mut clips = Vec::with_capacity(segments.len());
+        let mut fk = CmuBoneTransforms::default();
+        for (segment, range) in segments.iter().enumerate() {
+            let source = &poses[range.clone()];
+            let plan = resample_plan(source.len(), source_fps, options.fps);
+            let mut smpl_poses: Vec<SmplPose> = Vec::with_capacity(plan.len());
+            let mut errors = Vec::with_capacity(plan.len());
+            for (i, alpha) in plan {
+                if alpha == 0.0 {
+                    self.skeleton.forward_kinematics_into(&source[i], &mut fk);
+                } else {
+                    self.skeleton.forward_kinematics_into(&source[i].interpolate(&source[i + 1], alpha), &mut fk);
+                }
+                let frame = self.retargeter.retarget(&fk);
+                smpl_poses.push(frame.pose);
+                errors.push(frame.errors);
+            }
+            let (retarget, error_histogram) = retarget_stats(&errors);
+            let info = ClipInfo {
+                subject: self.subject,
+                trial,
+                name: format!("{:02}_{:02}", self.subject, trial),
+                segment: segment as u32,
+                description: entry.description.clone(),
+                source_fps,
+                source_frames: poses.len() as u32,
+                source_range: [range.start as u32, range.end as u32],
+                frames: smpl_poses.len() as u32,
+                frame_offset: 0,
+                head_height_m: self.retargeter.head_height(),
+                skeleton_scale: self.retargeter.scale(),
+                retarget,
+            };
+            clips.push(LibraryClip { info, poses: smpl_poses, error_histogram });
+        }
+        Ok(TrialImport { clips, source_frames: poses.len(), dropped_frames: poses.len() - kept, glitches })
+    }
+}

@@ -1,0 +1,605 @@
+//! The native session format, `.egoexo`: a zip archive (or the same files as a plain folder)
+//! with a versioned `session.json` manifest and data files. Specified, with a JSON Schema and
+//! an example, in `docs/session-format.md`.
+//!
+//! ```text
+//! session.json                                  manifest (format "egoexo-session", version 1)
+//! wearer/head/closed_loop_trajectory.csv        trajectories: the Aria MPS CSV layout
+//! wearer/left_wrist/closed_loop_trajectory.csv  (optional)
+//! wearer/right_wrist/closed_loop_trajectory.csv (optional)
+//! observers/<id>/closed_loop_trajectory.csv
+//! observers/<id>/keypoints.jsonl                (optional) JSON-lines keypoints
+//! observers/<id>/context_features.npz           (optional) timestamps_ns (N,), values (N, D)
+//! ground_truth.npz                              (optional) SMPL motion + occlusion labels
+//! ```
+//! Everything is in session conventions: Y-up world, metres, CPF head-device frames,
+//! nanoseconds on one clock. The manifest names every data file, so the layout above is what
+//! the writer produces, not something the reader assumes.
+//!
+//! `ground_truth.npz` arrays: `fps` (1,) f32; `start_ns` (1,) i64; `rest_joints` (24, 3) f32,
+//! metres, SMPL body frame; `betas` (B,) f32 (optional); `root_orientation_xyzw` (N, 4) f32;
+//! `body_rotations_xyzw` (N, 21, 4) f32 (joints 1..=21, local to their parents);
+//! `translation` (N, 3) f32 (SMPL `transl`: pelvis = rest pelvis + translation); `occluded`
+//! (O, N) u16 (optional; bit k = exo keypoint k occluded, rows in the order of the manifest's
+//! `ground_truth.occlusion_observers`). Quaternions are stored, not axis-angle, so a
+//! write → read round trip is exact.
+
+use std::collections::BTreeMap;
+
+use egoexo_core::camera::{CameraCalibration, Fisheye624, Pinhole, Projection};
+use egoexo_core::glam::{Quat, Vec3};
+use egoexo_core::motion::SmplMotion;
+use egoexo_core::rigid::RigidTransform;
+use egoexo_core::skeleton::{NUM_BODY_JOINTS, NUM_JOINTS, SmplPose, SmplSkeleton};
+use serde_json::{Value, json};
+use thiserror::Error;
+
+use crate::aria::trajectory::{Clock, WorldUp, read_closed_loop_trajectory, write_closed_loop_trajectory};
+use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
+use crate::json::{JsonCtx, join};
+use crate::keypoints::{read_keypoints_jsonl, write_keypoints_jsonl};
+use crate::model::{
+    ContextFeatureTrack, GroundTruth, Observer, ObserverOcclusion, Session, SubjectInfo, Trajectory, VideoRef, Wearer,
+};
+use crate::npz::{NpyArray, NpyData, Npz, NpzWriter};
+use crate::vfs::{FileTree, normalize_path};
+
+/// The manifest's file name.
+pub const MANIFEST_FILE: &str = "session.json";
+/// The manifest's `format` value.
+pub const FORMAT_NAME: &str = "egoexo-session";
+/// The manifest version this build reads and writes.
+pub const FORMAT_VERSION: u32 = 1;
+/// The fixed `conventions` object of version 1.
+pub fn conventions_json() -> Value {
+    json!({"world": "y_up", "device_frame": "cpf", "time": "nanoseconds", "length": "metres"})
+}
+
+/// Why a session could not be written.
+#[derive(Debug, Error)]
+pub enum WriteError {
+    /// The session fails validation.
+    #[error("the session is invalid: {0}")]
+    Invalid(#[from] ImportError),
+    /// Building an archive failed.
+    #[error("could not build {what}: {message}")]
+    Encode { what: String, message: String },
+    /// Writing to disk failed (native only).
+    #[error("could not write {path}: {source}")]
+    Io { path: String, source: std::io::Error },
+}
+
+/// The files of a session in `.egoexo` layout (path → bytes). Validates first.
+pub fn write_egoexo_files(session: &Session) -> Result<BTreeMap<String, Vec<u8>>, WriteError> {
+    crate::validate::validate_session(session)?;
+    let gravity = Vec3::new(0.0, -9.81, 0.0);
+    let mut files = BTreeMap::new();
+    let put_trajectory = |files: &mut BTreeMap<String, Vec<u8>>, path: String, t: &Trajectory| {
+        files.insert(path, write_closed_loop_trajectory(&t.timestamps_ns, &t.poses, "egoexo", gravity).into_bytes());
+    };
+    let head = "wearer/head/closed_loop_trajectory.csv".to_owned();
+    put_trajectory(&mut files, head.clone(), &session.wearer.head);
+    let mut wearer = json!({"head": head, "head_joint_in_device": session.wearer.head_joint_in_device.to_array()});
+    for (key, wrist) in [("left_wrist", &session.wearer.left_wrist), ("right_wrist", &session.wearer.right_wrist)] {
+        if let Some(wrist) = wrist {
+            let path = format!("wearer/{key}/closed_loop_trajectory.csv");
+            put_trajectory(&mut files, path.clone(), wrist);
+            wearer[key] = json!(path);
+        }
+    }
+    let mut observers = Vec::new();
+    for observer in &session.observers {
+        let dir = format!("observers/{}", observer.id);
+        let trajectory = format!("{dir}/closed_loop_trajectory.csv");
+        put_trajectory(&mut files, trajectory.clone(), &observer.head);
+        let mut entry = json!({"id": observer.id, "trajectory": trajectory, "camera": camera_json(&observer.camera)});
+        if let Some(kp) = &observer.keypoints {
+            let path = format!("{dir}/keypoints.jsonl");
+            files.insert(path.clone(), write_keypoints_jsonl(&observer.id, kp).into_bytes());
+            entry["keypoints"] = json!(path);
+        }
+        if let Some(video) = &observer.video {
+            entry["video"] = json!({"path": video.path, "start_ns": video.start_ns});
+        }
+        if let Some(features) = &observer.context_features {
+            let path = format!("{dir}/context_features.npz");
+            let mut npz = NpzWriter::new();
+            let n = features.timestamps_ns.len() as u64;
+            encode(npz.add("timestamps_ns", &[n], &features.timestamps_ns), &path)?;
+            encode(npz.add("values", &[n, features.dim as u64], &features.values), &path)?;
+            files.insert(path.clone(), encode(npz.finish(), &path)?);
+            entry["context_features"] = json!(path);
+        }
+        observers.push(entry);
+    }
+    let mut manifest = json!({
+        "format": FORMAT_NAME,
+        "version": FORMAT_VERSION,
+        "name": session.name,
+        "created_by": format!("egoexo-session {}", env!("CARGO_PKG_VERSION")),
+        "conventions": conventions_json(),
+        "subject": subject_json(&session.subject),
+        "wearer": wearer,
+        "observers": observers,
+    });
+    if let Some(gt) = &session.ground_truth {
+        let path = "ground_truth.npz".to_owned();
+        files.insert(path.clone(), ground_truth_npz(gt, &path)?);
+        let mut entry = json!({"motion": path});
+        if !gt.occlusion.is_empty() {
+            entry["occlusion_observers"] =
+                json!(gt.occlusion.iter().map(|o| o.observer_id.clone()).collect::<Vec<_>>());
+        }
+        manifest["ground_truth"] = entry;
+    }
+    let text = serde_json::to_string_pretty(&manifest)
+        .map_err(|e| WriteError::Encode { what: MANIFEST_FILE.into(), message: e.to_string() })?;
+    files.insert(MANIFEST_FILE.into(), text.into_bytes());
+    Ok(files)
+}
+
+/// The session as `.egoexo` zip bytes.
+pub fn write_egoexo_zip(session: &Session) -> Result<Vec<u8>, WriteError> {
+    let files = write_egoexo_files(session)?;
+    crate::vfs::zip_files(&files)
+        .map_err(|e| WriteError::Encode { what: "the .egoexo zip".into(), message: e.to_string() })
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+/// Writes the session to `path`: a zip file, or (with `as_folder`) a folder (native only).
+pub fn save_egoexo(session: &Session, path: &std::path::Path, as_folder: bool) -> Result<(), WriteError> {
+    let io = |source| WriteError::Io { path: path.display().to_string(), source };
+    if as_folder {
+        crate::vfs::write_dir(path, &write_egoexo_files(session)?).map_err(io)
+    } else {
+        std::fs::write(path, write_egoexo_zip(session)?).map_err(io)
+    }
+}
+
+fn encode<T, E: std::fmt::Display>(result: Result<T, E>, what: &str) -> Result<T, WriteError> {
+    result.map_err(|e| WriteError::Encode { what: what.into(), message: e.to_string() })
+}
+
+fn transform_json(t: &RigidTransform) -> Value {
+    json!({"translation": t.translation.to_array(), "rotation_xyzw": t.rotation.to_array()})
+}
+
+fn camera_json(camera: &CameraCalibration) -> Value {
+    let (model, params): (&str, Vec<f32>) = match &camera.projection {
+        Projection::Pinhole(k) => ("pinhole", vec![k.fx, k.fy, k.cx, k.cy]),
+        Projection::Fisheye624(f) => ("fisheye624", f.params().to_vec()),
+    };
+    let mut v = json!({
+        "model": model,
+        "params": params,
+        "width": camera.width,
+        "height": camera.height,
+        "t_device_camera": transform_json(&camera.t_device_camera),
+    });
+    if let Some(r) = camera.valid_radius_px {
+        v["valid_radius_px"] = json!(r);
+    }
+    v
+}
+
+fn subject_json(subject: &SubjectInfo) -> Value {
+    let mut v = json!({});
+    if let Some(h) = subject.height_m {
+        v["height_m"] = json!(h);
+    }
+    if let Some(b) = &subject.betas {
+        v["betas"] = json!(b);
+    }
+    if let Some(j) = &subject.rest_joints {
+        v["rest_joints"] = json!(j.iter().map(|p| p.to_array()).collect::<Vec<_>>());
+    }
+    v
+}
+
+fn ground_truth_npz(gt: &GroundTruth, path: &str) -> Result<Vec<u8>, WriteError> {
+    let m = &gt.motion;
+    let n = m.len() as u64;
+    let mut npz = NpzWriter::new();
+    encode(npz.add("fps", &[1], &[m.fps]), path)?;
+    encode(npz.add("start_ns", &[1], &[m.start_ns]), path)?;
+    let rest: Vec<f32> = m.skeleton.rest_joints().iter().flat_map(|p| p.to_array()).collect();
+    encode(npz.add("rest_joints", &[NUM_JOINTS as u64, 3], &rest), path)?;
+    if let Some(b) = &m.betas {
+        encode(npz.add("betas", &[b.len() as u64], b), path)?;
+    }
+    let root: Vec<f32> = m.poses.iter().flat_map(|p| p.root_orientation.to_array()).collect();
+    encode(npz.add("root_orientation_xyzw", &[n, 4], &root), path)?;
+    let body: Vec<f32> = m.poses.iter().flat_map(|p| p.body.iter().flat_map(|q| q.to_array())).collect();
+    encode(npz.add("body_rotations_xyzw", &[n, NUM_BODY_JOINTS as u64, 4], &body), path)?;
+    let trans: Vec<f32> = m.poses.iter().flat_map(|p| p.translation.to_array()).collect();
+    encode(npz.add("translation", &[n, 3], &trans), path)?;
+    if !gt.occlusion.is_empty() {
+        let masks: Vec<u16> = gt.occlusion.iter().flat_map(|o| o.occluded.iter().copied()).collect();
+        encode(npz.add("occluded", &[gt.occlusion.len() as u64, n], &masks), path)?;
+    }
+    encode(npz.finish(), path)
+}
+
+/// Reads a `.egoexo` session (zip or folder) rooted at `root`.
+pub fn read_egoexo(root: &FileTree) -> Result<(Session, Vec<ImportWarning>), ImportError> {
+    let manifest_file = root.display_path(MANIFEST_FILE);
+    let ctx = JsonCtx::file(&manifest_file);
+    let text = root.read_text(MANIFEST_FILE)?;
+    if text.trim().is_empty() {
+        return Err(ImportError::new(
+            &manifest_file,
+            Location::File,
+            ImportErrorKind::Empty { expected: "the session manifest (JSON)".into() },
+        ));
+    }
+    let doc = ctx.parse(&text)?;
+    let format = ctx.field(&doc, "", "format")?;
+    if format.as_str() != Some(FORMAT_NAME) {
+        return Err(ctx.invalid("format", format!("\"{FORMAT_NAME}\""), format));
+    }
+    let version = ctx.field(&doc, "", "version")?;
+    match version.as_u64() {
+        Some(v) if v == u64::from(FORMAT_VERSION) => {}
+        Some(v) => {
+            return Err(ctx.error(
+                "version",
+                ImportErrorKind::UnsupportedVersion { got: v.to_string(), supported: FORMAT_VERSION },
+            ));
+        }
+        None => {
+            return Err(ctx.error(
+                "version",
+                ImportErrorKind::UnsupportedVersion { got: crate::json::describe(version), supported: FORMAT_VERSION },
+            ));
+        }
+    }
+    let mut reader = ManifestReader { root, ctx, warnings: Vec::new() };
+    reader.known_keys(
+        &doc,
+        "",
+        &["format", "version", "name", "created_by", "conventions", "subject", "wearer", "observers", "ground_truth"],
+    );
+    let conventions = ctx.field(&doc, "", "conventions")?;
+    if *conventions != conventions_json() {
+        return Err(ctx.invalid("conventions", conventions_json().to_string(), conventions));
+    }
+    let name = ctx.str(ctx.field(&doc, "", "name")?, "name")?.to_owned();
+    let subject = reader.subject(ctx.field(&doc, "", "subject")?)?;
+    let wearer = reader.wearer(ctx.field(&doc, "", "wearer")?)?;
+    let observers_value = ctx.field(&doc, "", "observers")?;
+    let mut observers = Vec::new();
+    for (i, v) in ctx.array(observers_value, "observers")?.iter().enumerate() {
+        observers.push(reader.observer(v, &format!("observers[{i}]"))?);
+    }
+    let ground_truth = match ctx.optional(&doc, "", "ground_truth")? {
+        Some(v) => Some(reader.ground_truth(v)?),
+        None => None,
+    };
+    Ok((Session { name, wearer, observers, subject, ground_truth }, reader.warnings))
+}
+
+struct ManifestReader<'a> {
+    root: &'a FileTree,
+    ctx: JsonCtx<'a>,
+    warnings: Vec<ImportWarning>,
+}
+
+impl ManifestReader<'_> {
+    fn known_keys(&mut self, v: &Value, path: &str, known: &[&str]) {
+        if let Value::Object(map) = v {
+            for key in map.keys().filter(|k| !known.contains(&k.as_str())) {
+                self.warnings.push(ImportWarning {
+                    file: self.ctx.file.to_owned(),
+                    message: format!("unknown field `{}` ignored", join(path, key)),
+                });
+            }
+        }
+    }
+
+    /// A data file named by the manifest: a safe relative path that exists.
+    fn data_path(&self, v: &Value, path: &str) -> Result<String, ImportError> {
+        let raw = self.ctx.str(v, path)?;
+        let normalized = normalize_path(raw)
+            .ok_or_else(|| self.ctx.error(path, ImportErrorKind::UnsafePath { path: raw.to_owned() }))?;
+        if !self.root.contains(&normalized) {
+            return Err(ImportError::missing_file(
+                self.root.display_path(&normalized),
+                format!("the file named by {} field `{path}`", self.ctx.file),
+            ));
+        }
+        Ok(normalized)
+    }
+
+    fn trajectory(&self, v: &Value, path: &str) -> Result<Trajectory, ImportError> {
+        let file = self.data_path(v, path)?;
+        let display = self.root.display_path(&file);
+        let t = read_closed_loop_trajectory(&display, &self.root.read(&file)?, Clock::Device, WorldUp::Y)?;
+        Ok(Trajectory { timestamps_ns: t.timestamps_ns, poses: t.poses })
+    }
+
+    fn subject(&mut self, v: &Value) -> Result<SubjectInfo, ImportError> {
+        let ctx = self.ctx;
+        self.known_keys(v, "subject", &["height_m", "betas", "rest_joints"]);
+        let height_m = ctx.optional(v, "subject", "height_m")?.map(|h| ctx.f32(h, "subject.height_m")).transpose()?;
+        let betas = match ctx.optional(v, "subject", "betas")? {
+            Some(b) => {
+                let items = ctx.array(b, "subject.betas")?;
+                if items.is_empty() || items.len() > 300 {
+                    return Err(ctx.invalid("subject.betas", "1 to 300 SMPL shape coefficients", b));
+                }
+                Some(
+                    items
+                        .iter()
+                        .enumerate()
+                        .map(|(i, x)| ctx.f32(x, &format!("subject.betas[{i}]")))
+                        .collect::<Result<_, _>>()?,
+                )
+            }
+            None => None,
+        };
+        let rest_joints = match ctx.optional(v, "subject", "rest_joints")? {
+            Some(j) => {
+                let items = ctx.array(j, "subject.rest_joints")?;
+                if items.len() != NUM_JOINTS {
+                    return Err(ctx.invalid("subject.rest_joints", format!("{NUM_JOINTS} joints [x, y, z]"), j));
+                }
+                let mut joints = [Vec3::ZERO; NUM_JOINTS];
+                for (i, (slot, item)) in joints.iter_mut().zip(items).enumerate() {
+                    *slot = Vec3::from_array(ctx.f32_array::<3>(item, &format!("subject.rest_joints[{i}]"))?);
+                }
+                Some(joints)
+            }
+            None => None,
+        };
+        Ok(SubjectInfo { height_m, betas, rest_joints })
+    }
+
+    fn wearer(&mut self, v: &Value) -> Result<Wearer, ImportError> {
+        let ctx = self.ctx;
+        self.known_keys(v, "wearer", &["head", "left_wrist", "right_wrist", "head_joint_in_device"]);
+        let head = self.trajectory(ctx.field(v, "wearer", "head")?, "wearer.head")?;
+        let left_wrist =
+            ctx.optional(v, "wearer", "left_wrist")?.map(|w| self.trajectory(w, "wearer.left_wrist")).transpose()?;
+        let right_wrist =
+            ctx.optional(v, "wearer", "right_wrist")?.map(|w| self.trajectory(w, "wearer.right_wrist")).transpose()?;
+        let head_joint_in_device = Vec3::from_array(
+            ctx.f32_array::<3>(ctx.field(v, "wearer", "head_joint_in_device")?, "wearer.head_joint_in_device")?,
+        );
+        Ok(Wearer { head, left_wrist, right_wrist, head_joint_in_device })
+    }
+
+    fn transform(&self, v: &Value, path: &str) -> Result<RigidTransform, ImportError> {
+        let ctx = self.ctx;
+        let t = ctx.f32_array::<3>(ctx.field(v, path, "translation")?, &join(path, "translation"))?;
+        let q_path = join(path, "rotation_xyzw");
+        let q = ctx.f32_array::<4>(ctx.field(v, path, "rotation_xyzw")?, &q_path)?;
+        let q = Quat::from_array(q);
+        let norm = f64::from(q.length());
+        if (norm - 1.0).abs() > crate::aria::trajectory::QUATERNION_NORM_TOLERANCE {
+            return Err(ctx.error(
+                &q_path,
+                ImportErrorKind::NonUnitQuaternion {
+                    norm,
+                    tolerance: crate::aria::trajectory::QUATERNION_NORM_TOLERANCE,
+                },
+            ));
+        }
+        Ok(RigidTransform { rotation: q.normalize(), translation: Vec3::from_array(t) })
+    }
+
+    fn camera(&mut self, v: &Value, path: &str) -> Result<CameraCalibration, ImportError> {
+        let ctx = self.ctx;
+        self.known_keys(v, path, &["model", "params", "width", "height", "t_device_camera", "valid_radius_px"]);
+        let model_path = join(path, "model");
+        let model = ctx.field(v, path, "model")?;
+        let params_path = join(path, "params");
+        let params = ctx.field(v, path, "params")?;
+        let bad = |e: egoexo_core::camera::CameraError| {
+            ImportError::invalid(ctx.file, ctx.at(&params_path), "valid camera parameters", e.to_string())
+        };
+        let projection = match model.as_str() {
+            Some("fisheye624") => {
+                Projection::Fisheye624(Fisheye624::new(ctx.f32_array::<15>(params, &params_path)?).map_err(bad)?)
+            }
+            Some("pinhole") => {
+                let [fx, fy, cx, cy] = ctx.f32_array::<4>(params, &params_path)?;
+                Projection::Pinhole(Pinhole::new(fx, fy, cx, cy).map_err(bad)?)
+            }
+            _ => return Err(ctx.invalid(&model_path, "\"fisheye624\" or \"pinhole\"", model)),
+        };
+        let side = |key: &str| -> Result<u32, ImportError> {
+            let p = join(path, key);
+            let value = ctx.field(v, path, key)?;
+            match value.as_u64() {
+                Some(s) if (1..=crate::aria::calibration::MAX_IMAGE_SIDE_PX).contains(&s) => Ok(s as u32),
+                _ => Err(ctx.invalid(
+                    &p,
+                    format!("an image side of 1..={} pixels", crate::aria::calibration::MAX_IMAGE_SIDE_PX),
+                    value,
+                )),
+            }
+        };
+        let (width, height) = (side("width")?, side("height")?);
+        let t_device_camera = self.transform(ctx.field(v, path, "t_device_camera")?, &join(path, "t_device_camera"))?;
+        let mut camera = CameraCalibration::new(projection, width, height, t_device_camera)
+            .map_err(|e| ImportError::invalid(ctx.file, ctx.at(path), "a valid camera", e.to_string()))?;
+        if let Some(r) = ctx.optional(v, path, "valid_radius_px")? {
+            let radius = ctx.f32(r, &join(path, "valid_radius_px"))?;
+            if radius <= 0.0 {
+                return Err(ctx.invalid(&join(path, "valid_radius_px"), "a positive radius in pixels", r));
+            }
+            camera = camera.with_valid_radius(radius);
+        }
+        Ok(camera)
+    }
+
+    fn observer(&mut self, v: &Value, path: &str) -> Result<Observer, ImportError> {
+        let ctx = self.ctx;
+        self.known_keys(v, path, &["id", "trajectory", "camera", "keypoints", "video", "context_features"]);
+        let id_path = join(path, "id");
+        let id = ctx.str(ctx.field(v, path, "id")?, &id_path)?.to_owned();
+        if !crate::validate::is_valid_observer_id(&id) {
+            return Err(ctx.invalid(
+                &id_path,
+                "an observer id of 1–64 characters from A–Z, a–z, 0–9, `.`, `_`, `-`",
+                ctx.field(v, path, "id")?,
+            ));
+        }
+        let head = self.trajectory(ctx.field(v, path, "trajectory")?, &join(path, "trajectory"))?;
+        let camera = self.camera(ctx.field(v, path, "camera")?, &join(path, "camera"))?;
+        let keypoints = match ctx.optional(v, path, "keypoints")? {
+            Some(k) => {
+                let file = self.data_path(k, &join(path, "keypoints"))?;
+                Some(read_keypoints_jsonl(&self.root.display_path(&file), &self.root.read_text(&file)?, &id)?)
+            }
+            None => None,
+        };
+        let video = match ctx.optional(v, path, "video")? {
+            Some(video) => {
+                let vpath = join(path, "video");
+                let raw = ctx.str(ctx.field(video, &vpath, "path")?, &join(&vpath, "path"))?;
+                let normalized = normalize_path(raw).ok_or_else(|| {
+                    ctx.error(&join(&vpath, "path"), ImportErrorKind::UnsafePath { path: raw.to_owned() })
+                })?;
+                if !self.root.contains(&normalized) {
+                    self.warnings.push(ImportWarning {
+                        file: self.root.display_path(&normalized),
+                        message: format!("the video of observer `{id}` is not inside the session"),
+                    });
+                }
+                let start_ns = ctx.i64(ctx.field(video, &vpath, "start_ns")?, &join(&vpath, "start_ns"))?;
+                Some(VideoRef { path: normalized, start_ns })
+            }
+            None => None,
+        };
+        let context_features = match ctx.optional(v, path, "context_features")? {
+            Some(f) => {
+                let file = self.data_path(f, &join(path, "context_features"))?;
+                Some(self.context_features(&file)?)
+            }
+            None => None,
+        };
+        Ok(Observer { id, head, camera, keypoints, video, context_features })
+    }
+
+    fn context_features(&self, file: &str) -> Result<ContextFeatureTrack, ImportError> {
+        let display = self.root.display_path(file);
+        let npz = Npz::open(&display, self.root.read(file)?.into_owned(), self.root.limits())?;
+        let ts = npz.array_with_shape("timestamps_ns", &[None])?;
+        let n = ts.len();
+        let values = npz.array_with_shape("values", &[Some(n), None])?;
+        let timestamps_ns = ints(&display, "timestamps_ns", ts)?;
+        let dim = values.shape[1];
+        let values = floats(&display, "values", values)?;
+        Ok(ContextFeatureTrack { timestamps_ns, dim, values })
+    }
+
+    fn ground_truth(&mut self, v: &Value) -> Result<GroundTruth, ImportError> {
+        let ctx = self.ctx;
+        self.known_keys(v, "ground_truth", &["motion", "occlusion_observers"]);
+        let file = self.data_path(ctx.field(v, "ground_truth", "motion")?, "ground_truth.motion")?;
+        let display = self.root.display_path(&file);
+        let npz = Npz::open(&display, self.root.read(&file)?.into_owned(), self.root.limits())?;
+        let scalar = |name: &str| npz.array_with_shape(name, &[Some(1)]);
+        let fps = floats(&display, "fps", scalar("fps")?)?[0];
+        let start_ns = ints(&display, "start_ns", scalar("start_ns")?)?[0];
+        let rest = floats(&display, "rest_joints", npz.array_with_shape("rest_joints", &[Some(NUM_JOINTS), Some(3)])?)?;
+        let mut joints = [Vec3::ZERO; NUM_JOINTS];
+        for (j, p) in joints.iter_mut().enumerate() {
+            *p = Vec3::new(rest[3 * j], rest[3 * j + 1], rest[3 * j + 2]);
+        }
+        let skeleton = SmplSkeleton::from_rest_joints(joints).map_err(|e| {
+            ImportError::invalid(&display, Location::Field("rest_joints".into()), "a valid skeleton", e.to_string())
+        })?;
+        let betas = if npz.contains("betas") {
+            Some(floats(&display, "betas", npz.array_with_shape("betas", &[None])?)?)
+        } else {
+            None
+        };
+        let root = npz.array_with_shape("root_orientation_xyzw", &[None, Some(4)])?;
+        let n = root.shape[0];
+        let root = floats(&display, "root_orientation_xyzw", root)?;
+        let body = floats(
+            &display,
+            "body_rotations_xyzw",
+            npz.array_with_shape("body_rotations_xyzw", &[Some(n), Some(NUM_BODY_JOINTS), Some(4)])?,
+        )?;
+        let trans = floats(&display, "translation", npz.array_with_shape("translation", &[Some(n), Some(3)])?)?;
+        let quat = |values: &[f32], at: usize, field: &str| -> Result<Quat, ImportError> {
+            let q = Quat::from_xyzw(values[at], values[at + 1], values[at + 2], values[at + 3]);
+            let norm = f64::from(q.length());
+            if !q.is_finite() || (norm - 1.0).abs() > crate::aria::trajectory::QUATERNION_NORM_TOLERANCE {
+                return Err(ImportError::new(
+                    &display,
+                    Location::Field(field.to_owned()),
+                    ImportErrorKind::NonUnitQuaternion {
+                        norm,
+                        tolerance: crate::aria::trajectory::QUATERNION_NORM_TOLERANCE,
+                    },
+                ));
+            }
+            Ok(q.normalize())
+        };
+        let mut poses = Vec::with_capacity(n);
+        for i in 0..n {
+            let mut b = [Quat::IDENTITY; NUM_BODY_JOINTS];
+            for (j, q) in b.iter_mut().enumerate() {
+                *q = quat(&body, 4 * (i * NUM_BODY_JOINTS + j), &format!("body_rotations_xyzw[{i}, {j}]"))?;
+            }
+            poses.push(SmplPose {
+                root_orientation: quat(&root, 4 * i, &format!("root_orientation_xyzw[{i}]"))?,
+                body: b,
+                translation: Vec3::new(trans[3 * i], trans[3 * i + 1], trans[3 * i + 2]),
+            });
+        }
+        let motion = SmplMotion::new(fps, start_ns, skeleton, betas, poses)
+            .map_err(|e| ImportError::invalid(&display, Location::File, "a valid SMPL motion", e.to_string()))?;
+        let mut occlusion = Vec::new();
+        if let Some(ids) = ctx.optional(v, "ground_truth", "occlusion_observers")? {
+            let ids = ctx.array(ids, "ground_truth.occlusion_observers")?;
+            let masks = ints(&display, "occluded", npz.array_with_shape("occluded", &[Some(ids.len()), Some(n)])?)?;
+            for (o, id) in ids.iter().enumerate() {
+                let observer_id = ctx.str(id, &format!("ground_truth.occlusion_observers[{o}]"))?.to_owned();
+                let mut occluded = Vec::with_capacity(n);
+                for (i, &m) in masks[o * n..(o + 1) * n].iter().enumerate() {
+                    occluded.push(u16::try_from(m).map_err(|_| {
+                        ImportError::invalid(
+                            &display,
+                            Location::Field(format!("occluded[{o}, {i}]")),
+                            "a 16-bit mask",
+                            m.to_string(),
+                        )
+                    })?);
+                }
+                occlusion.push(ObserverOcclusion { observer_id, occluded });
+            }
+        }
+        Ok(GroundTruth { motion, occlusion })
+    }
+}
+
+fn floats(file: &str, name: &str, array: NpyArray) -> Result<Vec<f32>, ImportError> {
+    let values: Vec<f32> = match array.data {
+        NpyData::F32(v) => v,
+        NpyData::F64(v) => v.into_iter().map(|x| x as f32).collect(),
+        NpyData::Int(_) => {
+            return Err(ImportError::invalid(file, Location::Field(name.into()), "a float array", "an integer array"));
+        }
+    };
+    if let Some(i) = values.iter().position(|x| !x.is_finite()) {
+        return Err(ImportError::invalid(
+            file,
+            Location::Field(format!("{name}[{i}]")),
+            "a finite number",
+            values[i].to_string(),
+        ));
+    }
+    Ok(values)
+}
+
+fn ints(file: &str, name: &str, array: NpyArray) -> Result<Vec<i64>, ImportError> {
+    match array.data {
+        NpyData::Int(v) => Ok(v),
+        _ => Err(ImportError::invalid(file, Location::Field(name.into()), "an integer array", "a float array")),
+    }
+}

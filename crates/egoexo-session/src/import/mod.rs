@@ -1,0 +1,171 @@
+//! Session import: recognises what a folder or archive holds and runs the matching importer.
+//!
+//! | input | recognised by | importer |
+//! |---|---|---|
+//! | `.egoexo` (zip or folder) | `session.json` | [`crate::format`] |
+//! | Nymeria sequence | `recording_head/` | [`nymeria`] |
+//! | multi-device Aria MPS folder | `wearer/` | [`aria_mps`] |
+//! | one Aria MPS device folder | `closed_loop_trajectory.csv` (at the root, in `slam/` or `mps/slam/`) | [`aria_mps`] |
+//!
+//! When nothing is recognised at the root and every file lies in one top-level folder (a
+//! zipped folder), that folder is tried. After import, extra keypoint files
+//! ([`ImportOptions::keypoint_files`]) are attached and the session is validated
+//! ([`crate::validate`]).
+
+pub mod aria_mps;
+pub mod nymeria;
+
+use crate::aria::trajectory::Clock;
+use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
+use crate::keypoints::{CocoTiming, read_keypoints};
+use crate::model::Session;
+use crate::vfs::FileTree;
+
+/// A keypoint file given alongside the session (e.g. `egoexo convert --keypoints id=file`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct KeypointFile {
+    /// The observer it belongs to.
+    pub observer_id: String,
+    /// Its name (for messages and format detection: `.jsonl` = JSON lines).
+    pub name: String,
+    pub bytes: Vec<u8>,
+}
+
+/// Import choices.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ImportOptions {
+    /// Which MPS timestamp column to use (device clock by default).
+    pub clock: Clock,
+    /// How COCO keypoint frames get timestamps.
+    pub coco: CocoTiming,
+    /// Keypoint files to attach to observers (replacing any the session has).
+    pub keypoint_files: Vec<KeypointFile>,
+}
+
+/// What kind of input was recognised.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SourceKind {
+    Egoexo,
+    Nymeria,
+    AriaMultiDevice,
+    AriaSingleDevice,
+}
+
+impl SourceKind {
+    /// A human-readable name.
+    pub fn describe(self) -> &'static str {
+        match self {
+            SourceKind::Egoexo => ".egoexo session",
+            SourceKind::Nymeria => "Nymeria sequence",
+            SourceKind::AriaMultiDevice => "multi-device Aria MPS folder",
+            SourceKind::AriaSingleDevice => "single Aria MPS device folder",
+        }
+    }
+}
+
+/// An imported, validated session and what the import noticed on the way.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Imported {
+    pub session: Session,
+    pub source: SourceKind,
+    pub warnings: Vec<ImportWarning>,
+}
+
+/// Recognises the input; returns its kind and the view of its root.
+pub fn detect_source(tree: &FileTree) -> Result<(SourceKind, FileTree), ImportError> {
+    let probe = |t: &FileTree| -> Option<SourceKind> {
+        if t.contains(crate::format::MANIFEST_FILE) {
+            Some(SourceKind::Egoexo)
+        } else if t.contains_dir("recording_head") {
+            Some(SourceKind::Nymeria)
+        } else if t.contains_dir("wearer") {
+            Some(SourceKind::AriaMultiDevice)
+        } else if aria_mps::find_device(t).ok().flatten().is_some() {
+            Some(SourceKind::AriaSingleDevice)
+        } else {
+            None
+        }
+    };
+    if let Some(kind) = probe(tree) {
+        return Ok((kind, tree.clone()));
+    }
+    let inner = tree.strip_single_root();
+    if inner.prefix() != tree.prefix()
+        && let Some(kind) = probe(&inner)
+    {
+        return Ok((kind, inner));
+    }
+    let mut found: Vec<String> = tree.paths().into_iter().take(12).collect();
+    if found.len() == 12 {
+        found.push("…".into());
+    }
+    let found = if found.is_empty() { "no files".to_owned() } else { found.join(", ") };
+    Err(ImportError::new(tree.name(), Location::File, ImportErrorKind::Unrecognized { found }))
+}
+
+/// Imports any supported input (see the module docs).
+pub fn import_session(tree: &FileTree, options: &ImportOptions) -> Result<Imported, ImportError> {
+    let (source, root) = detect_source(tree)?;
+    let name = session_name(&root);
+    let (mut session, mut warnings) = match source {
+        SourceKind::Egoexo => crate::format::read_egoexo(&root)?,
+        SourceKind::Nymeria => nymeria::import_nymeria(&root, &name, options)?,
+        SourceKind::AriaMultiDevice => aria_mps::import_multi_device(&root, &name, options)?,
+        SourceKind::AriaSingleDevice => aria_mps::import_single_device(&root, &name, options)?,
+    };
+    for file in &options.keypoint_files {
+        attach_keypoints(&mut session, file, options.coco, &mut warnings)?;
+    }
+    warnings.extend(crate::validate::validate_session(&session)?);
+    Ok(Imported { session, source, warnings })
+}
+
+/// Reads a keypoint file into the observer it names.
+pub fn attach_keypoints(
+    session: &mut Session,
+    file: &KeypointFile,
+    coco: CocoTiming,
+    warnings: &mut Vec<ImportWarning>,
+) -> Result<(), ImportError> {
+    let known: Vec<String> = session.observers.iter().map(|o| o.id.clone()).collect();
+    let Some(observer) = session.observers.iter_mut().find(|o| o.id == file.observer_id) else {
+        return Err(ImportError::new(
+            &file.name,
+            Location::File,
+            ImportErrorKind::ObserverMismatch { expected: format!("one of {known:?}"), got: file.observer_id.clone() },
+        ));
+    };
+    let text = std::str::from_utf8(&file.bytes)
+        .map_err(|e| ImportError::invalid(&file.name, Location::File, "UTF-8 text", e.to_string()))?;
+    let start = observer.head.timestamps_ns.first().copied().unwrap_or_default();
+    let (track, more) = read_keypoints(&file.name, text, &observer.id, coco, start)?;
+    if observer.keypoints.is_some() {
+        warnings.push(ImportWarning {
+            file: file.name.clone(),
+            message: format!("replaces the keypoints observer `{}` already had", observer.id),
+        });
+    }
+    observer.keypoints = Some(track);
+    warnings.extend(more);
+    Ok(())
+}
+
+/// The session's name: the root folder's name, else the input's file stem.
+fn session_name(root: &FileTree) -> String {
+    let from_prefix = root.prefix().trim_end_matches('/').rsplit('/').next().unwrap_or_default();
+    let raw = if from_prefix.is_empty() {
+        let name = root.name().trim_end_matches(['/', '\\']);
+        let base = name.rsplit(['/', '\\']).next().unwrap_or(name);
+        base.strip_suffix(".zip").or_else(|| base.strip_suffix(".egoexo")).unwrap_or(base).to_owned()
+    } else {
+        from_prefix.to_owned()
+    };
+    if raw.is_empty() { "session".into() } else { raw }
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+/// Opens a folder or zip on disk and imports it (native only).
+pub fn import_path(path: &std::path::Path, options: &ImportOptions) -> Result<Imported, ImportError> {
+    let tree = FileTree::open(path, crate::vfs::Limits::default())?;
+    import_session(&tree, options)
+}

@@ -346,7 +346,8 @@ mod tests {
     #[test]
     fn pose_interpolation_endpoints_midpoint_and_short_arc() {
         let a = SmplPose { root_orientation: Quat::from_rotation_y(0.2), ..SmplPose::rest() };
-        let mut b = SmplPose { root_orientation: -Quat::from_rotation_y(0.6), translation: Vec3::X, ..SmplPose::rest() };
+        let mut b =
+            SmplPose { root_orientation: -Quat::from_rotation_y(0.6), translation: Vec3::X, ..SmplPose::rest() };
         b.body[3] = Quat::from_rotation_z(1.0);
         let mid = a.interpolate(&b, 0.5);
         assert!(crate::rotation::angle_between(mid.root_orientation, Quat::from_rotation_y(0.4)) < 1e-5);

@@ -20,7 +20,11 @@ pub fn rest_pose_window(window: &EgoWindow) -> Vec<f32> {
     let mut out = vec![0.0; WINDOW * POSE_DIM];
     for (t, head) in window.head.iter().enumerate() {
         let yaw = heading_yaw(r_window_world * head.rotation);
-        encode_pose(Quat::from_rotation_y(yaw), &[Quat::IDENTITY; NUM_BODY_JOINTS], &mut out[t * POSE_DIM..(t + 1) * POSE_DIM]);
+        encode_pose(
+            Quat::from_rotation_y(yaw),
+            &[Quat::IDENTITY; NUM_BODY_JOINTS],
+            &mut out[t * POSE_DIM..(t + 1) * POSE_DIM],
+        );
     }
     out
 }

@@ -53,14 +53,23 @@ fn padded<T: Copy>(frames: &[T], len: usize) -> Vec<T> {
 
 /// Ego features of one window. In 3-point mode the wrists must be tracked in every frame of
 /// the window (the planner only makes windows inside such spans).
-pub fn ego_window(aligned: &AlignedSession, plan: &WindowPlan, tracking: TrackingMode) -> Result<EgoWindow, InferError> {
+pub fn ego_window(
+    aligned: &AlignedSession,
+    plan: &WindowPlan,
+    tracking: TrackingMode,
+) -> Result<EgoWindow, InferError> {
     if plan.frames.is_empty() || plan.frames.len() > WINDOW || plan.frames.end > aligned.head.poses.len() {
-        return Err(InferError::Window(format!("window {:?} does not fit the {}-frame timeline", plan.frames, aligned.head.poses.len())));
+        return Err(InferError::Window(format!(
+            "window {:?} does not fit the {}-frame timeline",
+            plan.frames,
+            aligned.head.poses.len()
+        )));
     }
     // One frame of history from inside the span, so the first frame's velocities are real.
     let history = usize::from(plan.frames.start > plan.span.start);
     let from = plan.frames.start - history;
-    let slice = |poses: &[RigidTransform]| -> Vec<RigidTransform> { padded(&poses[from..plan.frames.end], WINDOW + history) };
+    let slice =
+        |poses: &[RigidTransform]| -> Vec<RigidTransform> { padded(&poses[from..plan.frames.end], WINDOW + history) };
     let head = slice(&aligned.head.poses);
     let wrists = match tracking {
         TrackingMode::OnePoint => None,
@@ -78,12 +87,23 @@ pub fn ego_window(aligned: &AlignedSession, plan: &WindowPlan, tracking: Trackin
     };
     let features = ego_features(&trajectories, history..history + WINDOW, aligned.timeline.fps, tracking)?;
     let frame_mask = (0..WINDOW).map(|i| f32::from(u8::from(i < plan.frames.len()))).collect();
-    Ok(EgoWindow { plan: plan.clone(), t_world_window: features.t_world_window, ego: features.features, head: head[history..].to_vec(), frame_mask })
+    Ok(EgoWindow {
+        plan: plan.clone(),
+        t_world_window: features.t_world_window,
+        ego: features.features,
+        head: head[history..].to_vec(),
+        frame_mask,
+    })
 }
 
 /// Decodes a `WINDOW × POSE_DIM` window-frame pose tensor into world SMPL poses, recovering
 /// each frame's root translation from the head device (`p_root = p_head − FK_head(θ)`).
-pub fn world_poses(window: &EgoWindow, poses_6d: &[f32], skeleton: &SmplSkeleton, head_joint_in_device: Vec3) -> Vec<SmplPose> {
+pub fn world_poses(
+    window: &EgoWindow,
+    poses_6d: &[f32],
+    skeleton: &SmplSkeleton,
+    head_joint_in_device: Vec3,
+) -> Vec<SmplPose> {
     poses_6d
         .chunks_exact(POSE_DIM)
         .zip(&window.head)
@@ -167,7 +187,8 @@ pub fn exo_window(
             }
             let observer_pose = &observer.head.poses[frame];
             let fk = &coarse_fk[t];
-            let region = propose_region(&fk.positions[..NUM_JOINTS], &observer.camera, observer_pose, DEFAULT_REGION_MARGIN);
+            let region =
+                propose_region(&fk.positions[..NUM_JOINTS], &observer.camera, observer_pose, DEFAULT_REGION_MARGIN);
             let predicted_points = exo_keypoints_from_smpl(&fk.positions, fk.rotations[SmplJoint::Head.index()], scale);
             let predicted = predicted_points.map(|p| project(&observer.camera, observer_pose, p));
             let detected = &observer.keypoints[frame];

@@ -81,7 +81,10 @@ impl Manifest {
             )));
         }
         if self.window != WINDOW {
-            return Err(InferError::Manifest(format!("manifest.json: window {} (this build uses {WINDOW})", self.window)));
+            return Err(InferError::Manifest(format!(
+                "manifest.json: window {} (this build uses {WINDOW})",
+                self.window
+            )));
         }
         for set in &self.model_sets {
             let mode = set.tracking.points();
@@ -98,10 +101,15 @@ impl Manifest {
                 )));
             }
             if set.ego_feature_layout.tracking != set.tracking {
-                return Err(InferError::Manifest(format!("manifest.json: {mode}-point set has a mismatched ego layout")));
+                return Err(InferError::Manifest(format!(
+                    "manifest.json: {mode}-point set has a mismatched ego layout"
+                )));
             }
             if set.max_observers == 0 || set.max_observers > 16 {
-                return Err(InferError::Manifest(format!("manifest.json: max_observers {} out of 1..=16", set.max_observers)));
+                return Err(InferError::Manifest(format!(
+                    "manifest.json: max_observers {} out of 1..=16",
+                    set.max_observers
+                )));
             }
         }
         Ok(())

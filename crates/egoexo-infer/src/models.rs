@@ -61,10 +61,7 @@ impl OnnxModel {
             values.push(Tensor::from_shape(shape, data).map_err(err)?.into());
         }
         let outputs = self.plan.run(values).map_err(err)?;
-        outputs
-            .iter()
-            .map(|t| Ok(t.to_plain_array_view::<f32>().map_err(err)?.iter().copied().collect()))
-            .collect()
+        outputs.iter().map(|t| Ok(t.to_plain_array_view::<f32>().map_err(err)?.iter().copied().collect())).collect()
     }
 }
 
@@ -80,12 +77,19 @@ pub struct ModelSet {
 impl ModelSet {
     /// Loads a model set, reading each file through `read` (a path relative to the models
     /// folder → bytes) and checking its sha256 against the manifest.
-    pub fn load(manifest: &ModelSetManifest, mut read: impl FnMut(&str) -> Result<Vec<u8>, InferError>) -> Result<Self, InferError> {
+    pub fn load(
+        manifest: &ModelSetManifest,
+        mut read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
+    ) -> Result<Self, InferError> {
         let mut load = |file: &ModelFile| -> Result<OnnxModel, InferError> {
             let bytes = read(&file.file)?;
             let digest = sha256_hex(&bytes);
             if digest != file.sha256 {
-                return Err(InferError::Checksum { file: file.file.clone(), expected: file.sha256.clone(), actual: digest });
+                return Err(InferError::Checksum {
+                    file: file.file.clone(),
+                    expected: file.sha256.clone(),
+                    actual: digest,
+                });
             }
             let shapes: Vec<Vec<usize>> = file.inputs.iter().map(|i| i.shape.clone()).collect();
             OnnxModel::load(&file.file, &bytes, &shapes)

@@ -177,7 +177,8 @@ impl Engine {
         progress: &mut dyn FnMut(Progress) -> bool,
     ) -> Result<Reconstruction, InferError> {
         let has_wrists = aligned.left_wrist.is_some() && aligned.right_wrist.is_some();
-        let tracking = options.tracking.unwrap_or(if has_wrists { TrackingMode::ThreePoint } else { TrackingMode::OnePoint });
+        let tracking =
+            options.tracking.unwrap_or(if has_wrists { TrackingMode::ThreePoint } else { TrackingMode::OnePoint });
         if tracking == TrackingMode::ThreePoint && !has_wrists {
             return Err(InferError::MissingWrists);
         }
@@ -187,7 +188,11 @@ impl Engine {
             None
         };
         let nearest = if options.method == Method::NearestNeighbour {
-            Some(self.nearest.get(&tracking.points()).ok_or(InferError::NoNearestNeighbourIndex { points: tracking.points() })?)
+            Some(
+                self.nearest
+                    .get(&tracking.points())
+                    .ok_or(InferError::NoNearestNeighbourIndex { points: tracking.points() })?,
+            )
         } else {
             None
         };
@@ -199,7 +204,8 @@ impl Engine {
                 let wrist_ok = |w: &Option<egoexo_session::align::AlignedTrajectory>| {
                     w.as_ref().is_some_and(|w| w.valid.get(f).copied().unwrap_or(false))
                 };
-                head && (tracking == TrackingMode::OnePoint || (wrist_ok(&aligned.left_wrist) && wrist_ok(&aligned.right_wrist)))
+                head && (tracking == TrackingMode::OnePoint
+                    || (wrist_ok(&aligned.left_wrist) && wrist_ok(&aligned.right_wrist)))
             })
             .collect();
         if !valid.iter().any(|&v| v) {
@@ -231,7 +237,12 @@ impl Engine {
         let ramp = if options.non_overlapping { 1 } else { WINDOW.saturating_sub(options.stride).max(1) };
         let n_obs = aligned.observers.len();
         let mut acc = vec![
-            Accumulator { weight: 0.0, pose: vec![0.0; POSE_DIM], gates: vec![0.0; n_obs * EXO_KEYPOINT_COUNT], evidence: false };
+            Accumulator {
+                weight: 0.0,
+                pose: vec![0.0; POSE_DIM],
+                gates: vec![0.0; n_obs * EXO_KEYPOINT_COUNT],
+                evidence: false
+            };
             frames
         ];
         let total = windows.len();
@@ -244,7 +255,13 @@ impl Engine {
             let plan = &window.plan;
             for t in 0..plan.len() {
                 let frame = plan.frames.start + t;
-                let w = crossfade_weight(t, plan.len(), ramp, plan.frames.start == plan.span.start, plan.frames.end == plan.span.end);
+                let w = crossfade_weight(
+                    t,
+                    plan.len(),
+                    ramp,
+                    plan.frames.start == plan.span.start,
+                    plan.frames.end == plan.span.end,
+                );
                 let row = &poses[t * POSE_DIM..(t + 1) * POSE_DIM];
                 let a = &mut acc[frame];
                 // Root orientation: rotate the window-frame 6D columns into the world first.
@@ -281,8 +298,12 @@ impl Engine {
                 (a.weight > 0.0).then(|| {
                     let row: Vec<f32> = a.pose.iter().map(|v| v / a.weight).collect();
                     let (root_orientation, body) = crate::inputs::decode_pose(&row);
-                    let translation =
-                        skeleton.recover_translation(root_orientation, &body, &aligned.head.poses[f], aligned.head_joint_in_device);
+                    let translation = skeleton.recover_translation(
+                        root_orientation,
+                        &body,
+                        &aligned.head.poses[f],
+                        aligned.head_joint_in_device,
+                    );
                     SmplPose { root_orientation, body, translation }
                 })
             })
@@ -344,7 +365,10 @@ fn concat_pose(model: &str, out: &[Vec<f32>]) -> Result<Vec<f32>, InferError> {
         return Err(InferError::Model { model: model.to_string(), message: "expected root and body outputs".into() });
     };
     if root.len() != WINDOW * 6 || body.len() != WINDOW * 6 * NUM_BODY_JOINTS {
-        return Err(InferError::Model { model: model.to_string(), message: format!("output sizes {} and {}", root.len(), body.len()) });
+        return Err(InferError::Model {
+            model: model.to_string(),
+            message: format!("output sizes {} and {}", root.len(), body.len()),
+        });
     }
     let mut pose = Vec::with_capacity(WINDOW * POSE_DIM);
     for t in 0..WINDOW {
@@ -372,7 +396,10 @@ fn run_fusion(
         _ => exo.ray_valid.clone(),
     };
     if gate.len() != exo.ray_valid.len() {
-        return Err(InferError::Model { model: models.gate.name().to_string(), message: format!("gate output has {} values", gate.len()) });
+        return Err(InferError::Model {
+            model: models.gate.name().to_string(),
+            message: format!("gate output has {} values", gate.len()),
+        });
     }
     let gate: Vec<f32> = gate.iter().zip(&exo.ray_valid).map(|(g, v)| g * v).collect();
     let exo_input = gated_exo(&exo, &gate);

@@ -109,7 +109,8 @@ mod tests {
 
     #[test]
     fn overlapping_windows_cover_every_frame() {
-        let plans = plan_windows(&[10..260], 48, false);
+        let span = 10..260;
+        let plans = plan_windows(std::slice::from_ref(&span), 48, false);
         assert!(plans.iter().all(|p| p.len() == WINDOW));
         let mut covered = vec![false; 260];
         for p in &plans {

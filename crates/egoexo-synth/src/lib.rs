@@ -13,12 +13,14 @@
 //! - [`detector`] — the 2D keypoint detector model.
 //! - [`cameras`] — Aria RGB (Fisheye624) and pinhole presets.
 //! - [`simulate`] — a full `Session` with ground truth and occlusion labels.
+//! - [`procedural`] — a procedural walking motion for tests and examples.
 
 pub mod cameras;
 pub mod config;
 pub mod detector;
 pub mod devices;
 pub mod observers;
+pub mod procedural;
 pub mod rng;
 pub mod scene;
 pub mod simulate;

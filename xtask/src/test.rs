@@ -11,6 +11,10 @@ use crate::tools;
 /// Crates whose tests also run compiled to wasm32 in headless Chromium.
 const WASM_TEST_CRATES: &[&str] = &["egoexo-core"];
 
+/// Single test targets (crate, test) that run compiled to wasm32 in headless Chromium, for
+/// crates whose other tests need native I/O.
+const WASM_TEST_TARGETS: &[(&str, &str)] = &[("egoexo-session", "export_wasm")];
+
 /// Chromium flags for a closed network and a root user (see shared/notes/toolchain.md);
 /// wasm-bindgen-test-runner adds `headless` and `no-sandbox` itself.
 const CHROMIUM_ARGS: &[&str] = &[
@@ -43,10 +47,14 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
         Some(t) => {
             let webdriver_json = write_webdriver_json(root, &t.chromium)?;
             let mut total = TestCounts::default();
-            for krate in WASM_TEST_CRATES {
+            let crates = WASM_TEST_CRATES.iter().map(|krate| vec!["--package", krate]);
+            let targets = WASM_TEST_TARGETS.iter().map(|(krate, test)| vec!["--package", krate, "--test", test]);
+            for selection in crates.chain(targets) {
                 let counts = cmd::run_tests(
                     Command::new("cargo")
-                        .args(["test", "--package", krate, "--target", "wasm32-unknown-unknown"])
+                        .arg("test")
+                        .args(&selection)
+                        .args(["--target", "wasm32-unknown-unknown"])
                         .env("CARGO_TARGET_WASM32_UNKNOWN_UNKNOWN_RUNNER", &t.wasm_bindgen_test_runner)
                         .env("CHROMEDRIVER", &t.chromedriver)
                         .env("WASM_BINDGEN_TEST_WEBDRIVER_JSON", &webdriver_json)

@@ -21,12 +21,18 @@ struct Cli {
 enum Command {
     /// Print a session's devices, time ranges, rates, observers, keypoint coverage and problems.
     Inspect(commands::inspect::Args),
+    /// Convert an Aria MPS folder, a Nymeria sequence or a `.egoexo` (plus keypoint files) to `.egoexo`.
+    Convert(commands::convert::Args),
+    /// The CMU motion library: `mocap import` retargets ASF/AMC to SMPL, `mocap info` summarises it.
+    Mocap(commands::mocap::Args),
 }
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result: Result<()> = match cli.command {
         Command::Inspect(args) => commands::inspect::run(args),
+        Command::Convert(args) => commands::convert::run(args),
+        Command::Mocap(args) => commands::mocap::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

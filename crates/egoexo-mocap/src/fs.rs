@@ -4,12 +4,14 @@
 //! Two layouts are recognised, anywhere below the given folder (up to [`MAX_SCAN_DEPTH`]
 //! levels): the project's subset (`cmu/NN/NN.asf`, `cmu/NN/NN_TT.amc`, `cmu/CMU_data.csv`)
 //! and CMU's own `allasfamc.zip` (`all_asfamc/subjects/NN/NN.asf`, `…/NN_TT.amc`). A subject
-//! is a folder holding `NN.asf`; its trials are the `NN_TT.amc` files beside it.
+//! is a folder holding `NN.asf`; its trials are the `NN_TT.amc` files beside it. Trials in
+//! BVH form (`NN_TT.bvh`, anywhere) are imported too, unless the same trial is there as AMC.
 
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
+use crate::bvh::import_bvh_trial;
 use crate::catalog::Catalog;
 use crate::import::{CMU_SOURCE, ImportError, ImportOptions, SubjectImporter, TrialImport, parse_trial_name};
 use crate::library::{LibraryError, MotionLibrary};
@@ -32,16 +34,34 @@ pub struct CmuTree {
     pub root: PathBuf,
     /// The shallowest `CMU_data.csv`, if any.
     pub catalog: Option<PathBuf>,
-    /// Subjects, ascending.
+    /// Subjects with an ASF, ascending.
     pub subjects: Vec<SubjectFiles>,
+    /// Trials in BVH form: `(subject, trial, path)`, ascending.
+    pub bvh_trials: Vec<(u32, u32, PathBuf)>,
     /// `.asf`/`.amc` files that were not used, with the reason.
     pub ignored: Vec<(PathBuf, String)>,
 }
 
 impl CmuTree {
-    /// Number of trials.
+    /// Number of trials (AMC and BVH).
     pub fn trial_count(&self) -> usize {
-        self.subjects.iter().map(|s| s.trials.len()).sum()
+        self.subjects.iter().map(|s| s.trials.len()).sum::<usize>() + self.bvh_trials.len()
+    }
+
+    /// Trials of the chosen subjects (all when `None`).
+    pub fn trial_count_of(&self, subjects: Option<&[u32]>) -> usize {
+        let chosen = |s: u32| subjects.is_none_or(|list| list.contains(&s));
+        self.subjects.iter().filter(|s| chosen(s.subject)).map(|s| s.trials.len()).sum::<usize>()
+            + self.bvh_trials.iter().filter(|t| chosen(t.0)).count()
+    }
+
+    /// Every subject with at least one trial, ascending.
+    pub fn subject_numbers(&self) -> Vec<u32> {
+        let mut all: Vec<u32> =
+            self.subjects.iter().map(|s| s.subject).chain(self.bvh_trials.iter().map(|t| t.0)).collect();
+        all.sort_unstable();
+        all.dedup();
+        all
     }
 }
 
@@ -60,6 +80,7 @@ pub fn scan_cmu_tree(root: &Path) -> Result<CmuTree, ImportError> {
     let mut subjects: Vec<SubjectFiles> = Vec::new();
     let mut ignored = Vec::new();
     let mut orphan_amcs: Vec<PathBuf> = Vec::new();
+    let mut bvh_trials: Vec<(u32, u32, PathBuf)> = Vec::new();
     while let Some((depth, folder)) = folders.pop() {
         let mut entries: Vec<PathBuf> = std::fs::read_dir(&folder)
             .map_err(|e| io_error(&folder, e))?
@@ -85,6 +106,12 @@ pub fn scan_cmu_tree(root: &Path) -> Result<CmuTree, ImportError> {
                 asfs.push(path);
             } else if has_extension(&path, "amc") {
                 amcs.push(path);
+            } else if has_extension(&path, "bvh") {
+                let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("");
+                match parse_trial_name(stem) {
+                    Some((subject, trial)) => bvh_trials.push((subject, trial, path)),
+                    None => ignored.push((path, "the name is not SUBJECT_TRIAL.bvh".to_owned())),
+                }
             }
         }
         let stem = |p: &Path| p.file_stem().and_then(|s| s.to_str()).unwrap_or("").to_owned();
@@ -115,15 +142,27 @@ pub fn scan_cmu_tree(root: &Path) -> Result<CmuTree, ImportError> {
     for amc in orphan_amcs {
         ignored.push((amc, "no SUBJECT.asf beside it".to_owned()));
     }
-    if subjects.iter().all(|s| s.trials.is_empty()) {
-        return Err(ImportError::EmptyTree(root.display().to_string()));
-    }
     subjects.retain(|s| !s.trials.is_empty());
     subjects.sort_by_key(|s| s.subject);
     for s in &mut subjects {
         s.trials.sort();
     }
-    Ok(CmuTree { root: root.to_path_buf(), catalog: catalog.map(|(_, p)| p), subjects, ignored })
+    bvh_trials.sort();
+    let mut kept_bvh: Vec<(u32, u32, PathBuf)> = Vec::new();
+    for (subject, trial, path) in bvh_trials {
+        let as_amc = subjects.iter().any(|s| s.subject == subject && s.trials.iter().any(|(t, _)| *t == trial));
+        if as_amc {
+            ignored.push((path, "the same trial is imported from its AMC".to_owned()));
+        } else if kept_bvh.iter().any(|(s, t, _)| *s == subject && *t == trial) {
+            ignored.push((path, "the same trial was already found elsewhere".to_owned()));
+        } else {
+            kept_bvh.push((subject, trial, path));
+        }
+    }
+    if subjects.is_empty() && kept_bvh.is_empty() {
+        return Err(ImportError::EmptyTree(root.display().to_string()));
+    }
+    Ok(CmuTree { root: root.to_path_buf(), catalog: catalog.map(|(_, p)| p), subjects, bvh_trials: kept_bvh, ignored })
 }
 
 /// Reads text that should be ASCII; stray non-UTF-8 bytes (in comments, file paths of the
@@ -181,21 +220,29 @@ pub fn import_tree(
         })
         .collect();
     let mut failures = Vec::new();
-    let mut jobs: Vec<(&SubjectImporter, u32, &Path)> = Vec::new();
+    // (subject, trial, path, the subject's ASF importer — `None` for a BVH trial)
+    let mut jobs: Vec<(u32, u32, &Path, Option<&SubjectImporter>)> = Vec::new();
     for (files, importer) in chosen.iter().zip(&importers) {
         if let Ok(importer) = importer {
-            jobs.extend(files.trials.iter().map(|(t, p)| (importer, *t, p.as_path())));
+            jobs.extend(files.trials.iter().map(|(t, p)| (files.subject, *t, p.as_path(), Some(importer))));
         }
     }
+    for (subject, trial, path) in &tree.bvh_trials {
+        if subjects.is_none_or(|list| list.contains(subject)) {
+            jobs.push((*subject, *trial, path.as_path(), None));
+        }
+    }
+    jobs.sort_by_key(|job| (job.0, job.1));
     let results: Vec<(&Path, Result<TrialImport, ImportError>)> = jobs
         .par_iter()
-        .map(|&(importer, trial, path)| {
+        .map(|&(subject, trial, path, importer)| {
             let file = path.display().to_string();
-            let result = match catalog.get(importer.subject(), trial) {
-                None => Err(ImportError::NotInCatalog { file, subject: importer.subject(), trial }),
-                Some(entry) => {
-                    read_text(path).and_then(|text| importer.import_trial(trial, &text, &file, entry, options))
-                }
+            let result = match catalog.get(subject, trial) {
+                None => Err(ImportError::NotInCatalog { file, subject, trial }),
+                Some(entry) => read_text(path).and_then(|text| match importer {
+                    Some(importer) => importer.import_trial(trial, &text, &file, entry, options),
+                    None => import_bvh_trial(&text, &file, subject, trial, entry, options),
+                }),
             };
             progress(TrialOutcome { path, result: result.as_ref() });
             (path, result)

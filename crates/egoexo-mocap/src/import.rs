@@ -30,11 +30,18 @@ pub struct ImportOptions {
     pub max_joint_speed_mps: f32,
     /// Clean stretches shorter than this (seconds) are dropped.
     pub min_segment_s: f32,
+    /// Metres per BVH length unit; `None` infers it from the skeleton's head height.
+    pub bvh_metres_per_unit: Option<f64>,
 }
 
 impl Default for ImportOptions {
     fn default() -> Self {
-        Self { fps: LIBRARY_FPS, max_joint_speed_mps: DEFAULT_MAX_JOINT_SPEED_MPS, min_segment_s: 1.0 }
+        Self {
+            fps: LIBRARY_FPS,
+            max_joint_speed_mps: DEFAULT_MAX_JOINT_SPEED_MPS,
+            min_segment_s: 1.0,
+            bvh_metres_per_unit: None,
+        }
     }
 }
 
@@ -49,12 +56,16 @@ pub enum ImportError {
     Retarget { file: String, source: RetargetError },
     #[error("{file}: trial {subject:02}_{trial:02} is not in CMU_data.csv, so its capture rate is unknown")]
     NotInCatalog { file: String, subject: u32, trial: u32 },
-    #[error("{file}: expected a file named SUBJECT_TRIAL.amc (e.g. 05_06.amc) or SUBJECT.asf")]
+    #[error("{file}: expected a file named SUBJECT_TRIAL.amc/.bvh (e.g. 05_06.amc) or SUBJECT.asf")]
     FileName { file: String },
     #[error("{file}: no clean stretch of at least {min_s} s in {frames} frames ({glitches} glitches)")]
     NoCleanFrames { file: String, frames: usize, glitches: usize, min_s: f32 },
     #[error("{file}: {source}")]
     Library { file: String, source: LibraryError },
+    #[error("{file}: {source}")]
+    Bvh { file: String, source: egoexo_session::bvh::BvhError },
+    #[error("{file}: cannot use the BVH's length unit: {detail}; give the metres per unit")]
+    BvhUnit { file: String, detail: String },
     #[error("{path}: {source}")]
     Io { path: String, source: std::io::Error },
     #[error("{0}: no CMU subject folders (NN/NN.asf with NN_TT.amc) found")]
@@ -154,56 +165,85 @@ impl SubjectImporter {
         options: &ImportOptions,
     ) -> Result<TrialImport, ImportError> {
         let poses = self.parse_motion(amc_text, file)?;
-        let source_fps = entry.framerate;
-        let positions = self.joint_positions(&poses);
-        let min_frames = (options.min_segment_s * source_fps).ceil().max(2.0) as usize;
-        let segments = clean_segments(&positions, source_fps, options.max_joint_speed_mps, min_frames);
-        let limit = options.max_joint_speed_mps / source_fps;
-        let glitches = crate::clean::frame_steps(&positions).iter().filter(|&&s| s > limit).count();
-        if segments.is_empty() {
-            return Err(ImportError::NoCleanFrames {
-                file: file.to_owned(),
-                frames: poses.len(),
-                glitches,
-                min_s: options.min_segment_s,
-            });
-        }
-        let kept: usize = segments.iter().map(|r| r.len()).sum();
-        let mut clips = Vec::with_capacity(segments.len());
-        let mut fk = CmuBoneTransforms::default();
-        for (segment, range) in segments.iter().enumerate() {
-            let source = &poses[range.clone()];
-            let plan = resample_plan(source.len(), source_fps, options.fps);
-            let mut smpl_poses: Vec<SmplPose> = Vec::with_capacity(plan.len());
-            let mut errors = Vec::with_capacity(plan.len());
-            for (i, alpha) in plan {
-                if alpha == 0.0 {
-                    self.skeleton.forward_kinematics_into(&source[i], &mut fk);
-                } else {
-                    self.skeleton.forward_kinematics_into(&source[i].interpolate(&source[i + 1], alpha), &mut fk);
-                }
-                let frame = self.retargeter.retarget(&fk);
-                smpl_poses.push(frame.pose);
-                errors.push(frame.errors);
+        let source = TrialSource { subject: self.subject, trial, file, entry };
+        clips_from_source(&self.retargeter, &source, options, poses.len(), |i, alpha, out| {
+            if alpha == 0.0 {
+                self.skeleton.forward_kinematics_into(&poses[i], out);
+            } else {
+                self.skeleton.forward_kinematics_into(&poses[i].interpolate(&poses[i + 1], alpha), out);
             }
-            let (retarget, error_histogram) = retarget_stats(&errors);
-            let info = ClipInfo {
-                subject: self.subject,
-                trial,
-                name: format!("{:02}_{:02}", self.subject, trial),
-                segment: segment as u32,
-                description: entry.description.clone(),
-                source_fps,
-                source_frames: poses.len() as u32,
-                source_range: [range.start as u32, range.end as u32],
-                frames: smpl_poses.len() as u32,
-                frame_offset: 0,
-                head_height_m: self.retargeter.head_height(),
-                skeleton_scale: self.retargeter.scale(),
-                retarget,
-            };
-            clips.push(LibraryClip { info, poses: smpl_poses, error_histogram });
-        }
-        Ok(TrialImport { clips, source_frames: poses.len(), dropped_frames: poses.len() - kept, glitches })
+        })
     }
+}
+
+/// Which trial a source is, for clip metadata and errors.
+pub(crate) struct TrialSource<'a> {
+    pub subject: u32,
+    pub trial: u32,
+    pub file: &'a str,
+    pub entry: &'a CatalogEntry,
+}
+
+/// Corrupt-frame trimming, resampling, retargeting and error statistics for one trial of
+/// `frames` source frames, whatever its format. `fk_at(i, alpha, out)` writes the bone
+/// transforms of source time `i + alpha` (frames; `alpha` in `[0, 1)`, and `alpha = 0` for the
+/// last frame) in the retargeter's bone indexing.
+pub(crate) fn clips_from_source(
+    retargeter: &Retargeter,
+    source: &TrialSource<'_>,
+    options: &ImportOptions,
+    frames: usize,
+    mut fk_at: impl FnMut(usize, f32, &mut CmuBoneTransforms),
+) -> Result<TrialImport, ImportError> {
+    let source_fps = source.entry.framerate;
+    let mut fk = CmuBoneTransforms::default();
+    let positions: Vec<[Vec3; NUM_JOINTS]> = (0..frames)
+        .map(|i| {
+            fk_at(i, 0.0, &mut fk);
+            retargeter.joint_map().positions(&fk)
+        })
+        .collect();
+    let min_frames = (options.min_segment_s * source_fps).ceil().max(2.0) as usize;
+    let segments = clean_segments(&positions, source_fps, options.max_joint_speed_mps, min_frames);
+    let limit = options.max_joint_speed_mps / source_fps;
+    let glitches = crate::clean::frame_steps(&positions).iter().filter(|&&s| s > limit).count();
+    if segments.is_empty() {
+        return Err(ImportError::NoCleanFrames {
+            file: source.file.to_owned(),
+            frames,
+            glitches,
+            min_s: options.min_segment_s,
+        });
+    }
+    let kept: usize = segments.iter().map(|r| r.len()).sum();
+    let mut clips = Vec::with_capacity(segments.len());
+    for (segment, range) in segments.iter().enumerate() {
+        let plan = resample_plan(range.len(), source_fps, options.fps);
+        let mut smpl_poses: Vec<SmplPose> = Vec::with_capacity(plan.len());
+        let mut errors = Vec::with_capacity(plan.len());
+        for (i, alpha) in plan {
+            fk_at(range.start + i, alpha, &mut fk);
+            let frame = retargeter.retarget(&fk);
+            smpl_poses.push(frame.pose);
+            errors.push(frame.errors);
+        }
+        let (retarget, error_histogram) = retarget_stats(&errors);
+        let info = ClipInfo {
+            subject: source.subject,
+            trial: source.trial,
+            name: format!("{:02}_{:02}", source.subject, source.trial),
+            segment: segment as u32,
+            description: source.entry.description.clone(),
+            source_fps,
+            source_frames: frames as u32,
+            source_range: [range.start as u32, range.end as u32],
+            frames: smpl_poses.len() as u32,
+            frame_offset: 0,
+            head_height_m: retargeter.head_height(),
+            skeleton_scale: retargeter.scale(),
+            retarget,
+        };
+        clips.push(LibraryClip { info, poses: smpl_poses, error_histogram });
+    }
+    Ok(TrialImport { clips, source_frames: frames, dropped_frames: frames - kept, glitches })
 }

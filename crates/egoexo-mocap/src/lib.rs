@@ -20,6 +20,7 @@
 
 pub mod amc;
 pub mod asf;
+pub mod bvh;
 pub mod catalog;
 pub mod clean;
 pub mod error;

@@ -34,7 +34,7 @@
 //! joint (forward kinematics of the output pose), over all 24 joints.
 
 use egoexo_core::glam::{Mat3, Quat, Vec3};
-use egoexo_core::skeleton::{NUM_BODY_JOINTS, NUM_JOINTS, PARENTS, SkeletonError, SmplPose, SmplSkeleton};
+use egoexo_core::skeleton::{JOINT_NAMES, NUM_BODY_JOINTS, NUM_JOINTS, PARENTS, SkeletonError, SmplPose, SmplSkeleton};
 use thiserror::Error;
 
 use crate::kinematics::{CmuBoneTransforms, CmuSkeleton};
@@ -155,45 +155,49 @@ pub struct CmuJointMap {
 }
 
 impl CmuJointMap {
-    /// Resolves [`CMU_TO_SMPL`] against a skeleton's bone names.
-    pub fn new(skeleton: &CmuSkeleton) -> Result<Self, RetargetError> {
+    /// Resolves [`CMU_TO_SMPL`] with `bone_index`, which finds a CMU (ASF) bone by name in
+    /// the source's bone transforms.
+    pub fn new(bone_index: impl Fn(&str) -> Option<usize>) -> Result<Self, RetargetError> {
         let mut terms: [Vec<(usize, f32)>; NUM_JOINTS] = Default::default();
         for (j, sources) in CMU_TO_SMPL.iter().enumerate() {
             for &(bone, weight) in *sources {
-                let index = skeleton
-                    .bone_index(bone)
-                    .ok_or(RetargetError::MissingBone { bone, joint: egoexo_core::skeleton::JOINT_NAMES[j] })?;
+                let index = bone_index(bone).ok_or(RetargetError::MissingBone { bone, joint: JOINT_NAMES[j] })?;
                 terms[j].push((index, weight));
             }
         }
         Ok(Self { terms })
     }
 
+    /// The map for an ASF skeleton.
+    pub fn for_skeleton(skeleton: &CmuSkeleton) -> Result<Self, RetargetError> {
+        Self::new(|name| skeleton.bone_index(name))
+    }
+
     /// The 24 mapped positions, metres, world frame.
     pub fn positions(&self, fk: &CmuBoneTransforms) -> [Vec3; NUM_JOINTS] {
-        std::array::from_fn(|j| self.terms[j].iter().map(|&(b, w)| fk.starts[b] * w).sum())
+        std::array::from_fn(|j| {
+            self.terms[j].iter().map(|&(b, w)| fk.starts.get(b).copied().unwrap_or(Vec3::NAN) * w).sum()
+        })
     }
 }
 
-/// The subject's standing head height, metres: the mapped head joint above the lowest
-/// mapped ankle/foot joint, in the ASF rest pose with the thighs swung to hang straight down
-/// (CMU's rest legs splay about 20°; SMPL's hang straight). Directly comparable to
-/// [`SmplSkeleton::head_height`].
-pub fn standing_head_height(skeleton: &CmuSkeleton, map: &CmuJointMap) -> f32 {
-    let mut pose = skeleton.rest_pose();
-    for thigh in ["lfemur", "rfemur"] {
-        if let Some(b) = skeleton.bone_index(thigh) {
-            let dir = skeleton.bones()[b].rest_offset.normalize_or_zero();
-            if dir != Vec3::ZERO {
-                // In the rest pose every parent rotation is the identity, so a rotation in
-                // global axes is also the bone's local rotation.
-                pose.local_rotations[b] = Quat::from_rotation_arc(dir, Vec3::NEG_Y);
-            }
+/// The subject's standing head height, metres, from the mapped joints of the rest pose: the
+/// head joint above the lowest ankle/foot joint once each leg is swung about its hip to hang
+/// straight down (CMU's rest legs splay about 20°; SMPL's hang straight). Directly
+/// comparable to [`SmplSkeleton::head_height`].
+pub fn standing_head_height(rest_targets: &[Vec3; NUM_JOINTS]) -> f32 {
+    let mut lowest = f32::INFINITY;
+    for (hip, knee, ankle, foot) in [(1, 4, 7, 10), (2, 5, 8, 11)] {
+        let p = rest_targets;
+        let swing = match (p[knee] - p[hip]).try_normalize() {
+            Some(thigh) => Quat::from_rotation_arc(thigh, Vec3::NEG_Y),
+            None => Quat::IDENTITY,
+        };
+        for j in [ankle, foot] {
+            lowest = lowest.min((p[hip] + swing * (p[j] - p[hip])).y);
         }
     }
-    let p = map.positions(&skeleton.forward_kinematics(&pose));
-    let lowest = [7, 8, 10, 11].iter().map(|&j| p[j].y).fold(f32::INFINITY, f32::min);
-    p[15].y - lowest
+    rest_targets[15].y - lowest
 }
 
 /// Retargets frames of one CMU subject onto the scaled SMPL mean skeleton.
@@ -224,19 +228,31 @@ pub struct RetargetedFrame {
 }
 
 impl Retargeter {
-    /// Sets up retargeting for a subject's skeleton.
+    /// Sets up retargeting for a subject's ASF skeleton.
     pub fn new(skeleton: &CmuSkeleton) -> Result<Self, RetargetError> {
-        let map = CmuJointMap::new(skeleton)?;
+        let rest = skeleton.forward_kinematics(&skeleton.rest_pose());
+        Self::from_rest(|name| skeleton.bone_index(name), &rest)
+    }
+
+    /// Sets up retargeting for any source that provides CMU (ASF-named) bones: `bone_index`
+    /// finds a bone by its ASF name in the source's [`CmuBoneTransforms`], and `rest` is the
+    /// source's rest pose (every rotation the identity; Y up). Frames passed to
+    /// [`Retargeter::retarget`] must then give bone starts in metres and rotations as
+    /// `W_b` = rest → current, in the same indexing.
+    pub fn from_rest(
+        bone_index: impl Fn(&str) -> Option<usize>,
+        rest: &CmuBoneTransforms,
+    ) -> Result<Self, RetargetError> {
+        let map = CmuJointMap::new(&bone_index)?;
         let mut twist_segment = [None; NUM_JOINTS];
         for (j, seg) in TWIST_SEGMENT.iter().enumerate() {
             if let Some(bone) = seg {
-                let index = skeleton
-                    .bone_index(bone)
-                    .ok_or(RetargetError::MissingBone { bone, joint: egoexo_core::skeleton::JOINT_NAMES[j] })?;
+                let index = bone_index(bone).ok_or(RetargetError::MissingBone { bone, joint: JOINT_NAMES[j] })?;
                 twist_segment[j] = Some(index);
             }
         }
-        let head_height = standing_head_height(skeleton, &map);
+        let rest_targets = map.positions(rest);
+        let head_height = standing_head_height(&rest_targets);
         let mean = SmplSkeleton::mean_shape();
         // Validates the height; the skeleton is then built from the stored scale exactly as
         // a library loader rebuilds it (`mean_shape().scaled(scale)`).
@@ -244,15 +260,21 @@ impl Retargeter {
         let scale = head_height / mean.head_height();
         let smpl = mean.scaled(scale);
 
-        let rest_targets = map.positions(&skeleton.forward_kinematics(&skeleton.rest_pose()));
+        // The source's rest facing about the vertical: SMPL's left (+X) onto the source's
+        // left-hip direction. The identity for CMU's ASF (its rest pose faces +Z too).
+        let left = rest_targets[1] - rest_targets[2];
+        let facing = match Vec3::new(left.x, 0.0, left.z).try_normalize() {
+            Some(l) => Quat::from_rotation_arc(Vec3::X, l),
+            None => Quat::IDENTITY,
+        };
         let rest = smpl.rest_joints();
-        let mut rest_alignment = [Quat::IDENTITY; NUM_JOINTS];
+        let mut rest_alignment = [facing; NUM_JOINTS];
         for j in 0..NUM_JOINTS {
             if let Fit::Aim(c) = FIT[j] {
-                let smpl_dir = (rest[c] - rest[j]).normalize_or_zero();
+                let smpl_dir = (facing * (rest[c] - rest[j])).normalize_or_zero();
                 let cmu_dir = (rest_targets[c] - rest_targets[j]).normalize_or_zero();
                 if smpl_dir != Vec3::ZERO && cmu_dir != Vec3::ZERO {
-                    rest_alignment[j] = Quat::from_rotation_arc(smpl_dir, cmu_dir);
+                    rest_alignment[j] = Quat::from_rotation_arc(smpl_dir, cmu_dir) * facing;
                 }
             }
         }
@@ -382,7 +404,7 @@ impl Retargeter {
             global[j] = match FIT[j] {
                 Fit::ThreeChildren(children) => {
                     let pairs = children.map(|c| (rest[c] - rest[j], targets[c] - position[j]));
-                    best_rotation(&pairs).or(segment).unwrap_or(Quat::IDENTITY)
+                    best_rotation(&pairs).or(segment.map(|w| w * self.rest_alignment[j])).unwrap_or(Quat::IDENTITY)
                 }
                 Fit::Aim(c) => {
                     let candidate = (segment.unwrap_or(Quat::IDENTITY) * self.rest_alignment[j]).normalize();
@@ -393,7 +415,7 @@ impl Retargeter {
                         _ => candidate,
                     }
                 }
-                Fit::Segment => segment.unwrap_or(Quat::IDENTITY),
+                Fit::Segment => segment.unwrap_or(Quat::IDENTITY) * self.rest_alignment[j],
                 Fit::Parent => global[PARENTS[j] as usize],
             };
         }

@@ -151,7 +151,8 @@ pub enum AlignError {
 /// `exo_from_coco17`; none otherwise (detections are never interpolated). Context features:
 /// likewise. Ground truth: per-joint slerp and translation lerp between its two frames
 /// around the time (its frames are regular, so every time inside its range is valid);
-/// occlusion masks from the nearest ground-truth frame. The session is validated first.
+/// occlusion masks from the nearest ground-truth frame (ties: the earlier). The session is
+/// validated first.
 pub fn align(session: &Session, options: &AlignOptions) -> Result<AlignedSession, AlignError> {
     if !(options.fps.is_finite() && options.fps > 0.0 && options.fps <= 1000.0) {
         return Err(AlignError::InvalidFps(options.fps));
@@ -256,7 +257,7 @@ pub fn align(session: &Session, options: &AlignOptions) -> Result<AlignedSession
             let alpha = (x - i as f64) as f32;
             poses.push(motion.poses[i].interpolate(&motion.poses[j], alpha));
             valid.push(true);
-            nearest_frame.push(Some(if alpha < 0.5 { i } else { j }));
+            nearest_frame.push(Some(if alpha <= 0.5 { i } else { j }));
         }
         let occluded = session
             .observers
@@ -339,4 +340,170 @@ fn resample_trajectory(trajectory: &Trajectory, times: &[i64], max_gap_ns: i64) 
         poses.push(sample.unwrap_or(RigidTransform::IDENTITY));
     }
     AlignedTrajectory { poses, valid }
+}
+
+#[cfg(test)]
+mod tests {
+    use egoexo_core::camera::{CameraCalibration, Pinhole, Projection};
+    use egoexo_core::exo_keypoints::COCO17_COUNT;
+    use egoexo_core::glam::{Quat, Vec2};
+    use egoexo_core::motion::SmplMotion;
+
+    use super::*;
+    use crate::model::{GroundTruth, KeypointTrack, Observer, ObserverOcclusion, SubjectInfo, Wearer};
+
+    const MS: i64 = 1_000_000;
+
+    fn trajectory(times_ms: &[i64]) -> Trajectory {
+        Trajectory {
+            timestamps_ns: times_ms.iter().map(|t| t * MS).collect(),
+            poses: times_ms
+                .iter()
+                .map(|&t| {
+                    RigidTransform::new(Quat::from_rotation_y(t as f32 * 1e-3), Vec3::new(t as f32 * 1e-3, 1.6, 0.0))
+                })
+                .collect(),
+        }
+    }
+
+    fn session(head: Trajectory) -> Session {
+        Session {
+            name: "t".into(),
+            wearer: Wearer {
+                head,
+                left_wrist: None,
+                right_wrist: None,
+                head_joint_in_device: Vec3::new(0.0, -0.06, -0.09),
+            },
+            observers: Vec::new(),
+            subject: SubjectInfo::default(),
+            ground_truth: None,
+        }
+    }
+
+    fn observer(id: &str, head: Trajectory, keypoint_times_ms: &[i64]) -> Observer {
+        let kp = |t: i64| Some(Keypoint2d { pixel: Vec2::new(t as f32, 0.0), score: 0.9 });
+        Observer {
+            id: id.into(),
+            head,
+            camera: CameraCalibration::new(
+                Projection::Pinhole(Pinhole::new(500.0, 500.0, 320.0, 240.0).unwrap()),
+                640,
+                480,
+                RigidTransform::IDENTITY,
+            )
+            .unwrap(),
+            keypoints: Some(KeypointTrack {
+                timestamps_ns: keypoint_times_ms.iter().map(|t| t * MS).collect(),
+                frames: keypoint_times_ms
+                    .iter()
+                    .map(|&t| std::array::from_fn::<_, COCO17_COUNT, _>(|_| kp(t)))
+                    .collect(),
+            }),
+            video: None,
+            context_features: None,
+        }
+    }
+
+    #[test]
+    fn short_gaps_are_bridged_and_long_gaps_are_invalid() {
+        // 10 fps timeline over 0..=1000 ms; samples every 20 ms except an 80 ms gap
+        // (bridged) and a 300 ms gap (not).
+        let mut times: Vec<i64> = (0..=200).step_by(20).collect();
+        times.extend((280..=400).step_by(20));
+        times.extend((700..=1000).step_by(20));
+        let s = session(trajectory(&times));
+        let a = align(&s, &AlignOptions { fps: 10.0, ..AlignOptions::default() }).unwrap();
+        assert_eq!(a.timeline.frames, 11);
+        let valid: Vec<bool> = a.head.valid.clone();
+        assert_eq!(valid, [true, true, true, true, true, false, false, true, true, true, true]);
+        // 250 ms is inside the bridged gap: interpolated between 200 and 280 ms.
+        let expected = s.wearer.head.poses[10].interpolate(&s.wearer.head.poses[11], 50.0 / 80.0);
+        let mid = a.head.poses[2];
+        assert_eq!(a.timeline.timestamp_ns(2), 200 * MS);
+        assert!(mid.translation.abs_diff_eq(s.wearer.head.poses[10].translation, 1e-6));
+        let a2 = align(&s, &AlignOptions { fps: 4.0, ..AlignOptions::default() }).unwrap();
+        assert_eq!(a2.timeline.timestamp_ns(1), 250 * MS);
+        assert!(a2.head.valid[1]);
+        assert!(a2.head.poses[1].translation.abs_diff_eq(expected.translation, 1e-6));
+        // Invalid frames hold the identity, never an invented pose.
+        assert_eq!(a.head.poses[5], RigidTransform::IDENTITY);
+        let cov = &a.coverage[0];
+        assert_eq!((cov.stream.as_str(), cov.valid_frames, cov.frames), ("wearer/head", 9, 11));
+    }
+
+    #[test]
+    fn observer_outside_its_range_and_keypoint_tolerance() {
+        let mut s = session(trajectory(&(0..=1000).step_by(10).collect::<Vec<_>>()));
+        // Observer tracked from 300 ms; keypoints 10 ms and 20 ms away from frame times.
+        s.observers.push(observer("o", trajectory(&(300..=1000).step_by(10).collect::<Vec<_>>()), &[410, 620, 900]));
+        let a = align(&s, &AlignOptions { fps: 10.0, ..AlignOptions::default() }).unwrap();
+        let o = &a.observers[0];
+        assert_eq!(o.head.valid.iter().filter(|v| **v).count(), 8);
+        assert!(!o.head.valid[2] && o.head.valid[3]);
+        // Tolerance = half a frame = 50 ms: all three detections are assigned…
+        assert!(o.keypoints[4][0].is_some() && o.keypoints[6][0].is_some() && o.keypoints[9][0].is_some());
+        assert_eq!(o.keypoints[4][0].unwrap().pixel.x, 410.0, "mapped with exo_from_coco17 (nose first)");
+        // …and with a 15 ms tolerance only the one 10 ms away.
+        let tight =
+            align(&s, &AlignOptions { fps: 10.0, keypoint_tolerance_ns: Some(15 * MS), ..AlignOptions::default() })
+                .unwrap();
+        let hits: Vec<usize> = (0..11).filter(|&i| tight.observers[0].keypoints[i][0].is_some()).collect();
+        assert_eq!(hits, [4, 9]);
+        let cov = tight.coverage.iter().find(|c| c.stream == "o/keypoints").unwrap();
+        assert_eq!(cov.valid_frames, 2);
+    }
+
+    #[test]
+    fn ground_truth_is_interpolated_and_occlusion_follows_observer_order() {
+        let mut s = session(trajectory(&(0..=1000).step_by(10).collect::<Vec<_>>()));
+        s.observers.push(observer("b", trajectory(&[0, 1000]), &[0]));
+        s.observers.push(observer("a", trajectory(&[0, 1000]), &[0]));
+        let poses: Vec<SmplPose> = (0..5)
+            .map(|i| SmplPose { root_orientation: Quat::from_rotation_y(0.1 * i as f32), ..SmplPose::rest() })
+            .collect();
+        let motion =
+            SmplMotion::new(5.0, 200 * MS, egoexo_core::skeleton::SmplSkeleton::mean_shape(), None, poses).unwrap();
+        s.ground_truth = Some(GroundTruth {
+            motion,
+            occlusion: vec![ObserverOcclusion { observer_id: "a".into(), occluded: vec![1, 2, 3, 4, 5] }],
+        });
+        let a = align(&s, &AlignOptions { fps: 10.0, ..AlignOptions::default() }).unwrap();
+        let gt = a.ground_truth.unwrap();
+        // Motion frames at 200, 400, …, 1000 ms.
+        assert_eq!(gt.valid, [false, false, true, true, true, true, true, true, true, true, true]);
+        let angle = egoexo_core::rotation::angle_between(gt.poses[3].root_orientation, Quat::from_rotation_y(0.05));
+        assert!(angle < 1e-5, "300 ms is halfway between frames 0 and 1: {angle}");
+        assert_eq!(gt.occluded[0], vec![0; 11], "observer b has no labels");
+        assert_eq!(gt.occluded[1][2..].to_vec(), vec![1, 1, 2, 2, 3, 3, 4, 4, 5]);
+    }
+
+    #[test]
+    fn bad_options_and_absurd_ranges_are_errors() {
+        let s = session(trajectory(&[0, 10]));
+        assert_eq!(align(&s, &AlignOptions { fps: 0.0, ..AlignOptions::default() }), Err(AlignError::InvalidFps(0.0)));
+        assert!(matches!(
+            align(&s, &AlignOptions { max_gap_ns: 0, ..AlignOptions::default() }),
+            Err(AlignError::InvalidGap(0))
+        ));
+        // A century-long head trajectory is refused before anything is allocated.
+        let long = session(Trajectory {
+            timestamps_ns: vec![0, 3_155_760_000_000_000_000],
+            poses: vec![RigidTransform::IDENTITY; 2],
+        });
+        let err = align(&long, &AlignOptions::default()).unwrap_err();
+        assert!(matches!(err, AlignError::TooManyFrames { .. }), "{err}");
+        assert!(err.to_string().contains("over the limit of 10000000"));
+        let empty = session(Trajectory::default());
+        assert_eq!(align(&empty, &AlignOptions::default()), Err(AlignError::EmptyHead));
+    }
+
+    #[test]
+    fn nearest_respects_ties_and_tolerance() {
+        let ts = [0, 10, 20];
+        assert_eq!(nearest(&ts, 5, 5), Some(0));
+        assert_eq!(nearest(&ts, 16, 5), Some(2));
+        assert_eq!(nearest(&ts, 26, 5), None);
+        assert_eq!(nearest(&[], 0, 5), None);
+    }
 }

@@ -79,7 +79,8 @@ pub fn write_egoexo_files(session: &Session) -> Result<BTreeMap<String, Vec<u8>>
     };
     let head = "wearer/head/closed_loop_trajectory.csv".to_owned();
     put_trajectory(&mut files, head.clone(), &session.wearer.head);
-    let mut wearer = json!({"head": head, "head_joint_in_device": session.wearer.head_joint_in_device.to_array()});
+    let mut wearer =
+        json!({"head": head, "head_joint_in_device": f32s(&session.wearer.head_joint_in_device.to_array())});
     for (key, wrist) in [("left_wrist", &session.wearer.left_wrist), ("right_wrist", &session.wearer.right_wrist)] {
         if let Some(wrist) = wrist {
             let path = format!("wearer/{key}/closed_loop_trajectory.csv");
@@ -160,8 +161,18 @@ fn encode<T, E: std::fmt::Display>(result: Result<T, E>, what: &str) -> Result<T
     result.map_err(|e| WriteError::Encode { what: what.into(), message: e.to_string() })
 }
 
+/// An f32 as the JSON number with the same shortest decimal form (`1.7`, not
+/// `1.7000000476837158`); reading it as f64 and casting back gives the same f32.
+fn f32_json(x: f32) -> Value {
+    x.to_string().parse::<f64>().ok().and_then(serde_json::Number::from_f64).map_or(Value::Null, Value::Number)
+}
+
+fn f32s(values: &[f32]) -> Value {
+    Value::Array(values.iter().map(|&x| f32_json(x)).collect())
+}
+
 fn transform_json(t: &RigidTransform) -> Value {
-    json!({"translation": t.translation.to_array(), "rotation_xyzw": t.rotation.to_array()})
+    json!({"translation": f32s(&t.translation.to_array()), "rotation_xyzw": f32s(&t.rotation.to_array())})
 }
 
 fn camera_json(camera: &CameraCalibration) -> Value {
@@ -171,13 +182,13 @@ fn camera_json(camera: &CameraCalibration) -> Value {
     };
     let mut v = json!({
         "model": model,
-        "params": params,
+        "params": f32s(&params),
         "width": camera.width,
         "height": camera.height,
         "t_device_camera": transform_json(&camera.t_device_camera),
     });
     if let Some(r) = camera.valid_radius_px {
-        v["valid_radius_px"] = json!(r);
+        v["valid_radius_px"] = f32_json(r);
     }
     v
 }
@@ -185,13 +196,13 @@ fn camera_json(camera: &CameraCalibration) -> Value {
 fn subject_json(subject: &SubjectInfo) -> Value {
     let mut v = json!({});
     if let Some(h) = subject.height_m {
-        v["height_m"] = json!(h);
+        v["height_m"] = f32_json(h);
     }
     if let Some(b) = &subject.betas {
-        v["betas"] = json!(b);
+        v["betas"] = f32s(b);
     }
     if let Some(j) = &subject.rest_joints {
-        v["rest_joints"] = json!(j.iter().map(|p| p.to_array()).collect::<Vec<_>>());
+        v["rest_joints"] = Value::Array(j.iter().map(|p| f32s(&p.to_array())).collect());
     }
     v
 }
@@ -384,7 +395,7 @@ impl ManifestReader<'_> {
                 },
             ));
         }
-        Ok(RigidTransform { rotation: q.normalize(), translation: Vec3::from_array(t) })
+        Ok(RigidTransform { rotation: unit(q), translation: Vec3::from_array(t) })
     }
 
     fn camera(&mut self, v: &Value, path: &str) -> Result<CameraCalibration, ImportError> {
@@ -538,7 +549,7 @@ impl ManifestReader<'_> {
                     },
                 ));
             }
-            Ok(q.normalize())
+            Ok(unit(q))
         };
         let mut poses = Vec::with_capacity(n);
         for i in 0..n {
@@ -576,6 +587,12 @@ impl ManifestReader<'_> {
         }
         Ok(GroundTruth { motion, occlusion })
     }
+}
+
+/// Renormalises a quaternion that is not unit to f32 precision already (so that what the
+/// writer stored reads back bit for bit).
+fn unit(q: Quat) -> Quat {
+    if (q.length() - 1.0).abs() > 1e-6 { q.normalize() } else { q }
 }
 
 fn floats(file: &str, name: &str, array: NpyArray) -> Result<Vec<f32>, ImportError> {

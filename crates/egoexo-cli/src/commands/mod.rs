@@ -1,3 +1,6 @@
 //! One module per subcommand.
 
+pub mod convert;
 pub mod inspect;
+pub mod mocap;
+pub mod session_input;

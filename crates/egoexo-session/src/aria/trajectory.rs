@@ -233,8 +233,10 @@ pub fn read_closed_loop_trajectory(
                 ImportErrorKind::NonUnitQuaternion { norm, tolerance: QUATERNION_NORM_TOLERANCE },
             ));
         }
+        // Renormalise only what is not unit already, so written → read round trips are exact.
+        let scale = if (norm - 1.0).abs() > 1e-6 { norm } else { 1.0 };
         let rotation =
-            Quat::from_xyzw((q[0] / norm) as f32, (q[1] / norm) as f32, (q[2] / norm) as f32, (q[3] / norm) as f32);
+            Quat::from_xyzw((q[0] / scale) as f32, (q[1] / scale) as f32, (q[2] / scale) as f32, (q[3] / scale) as f32);
         let translation = Vec3::new(values[0] as f32, values[1] as f32, values[2] as f32);
 
         if let Some(cols) = gravity_columns {

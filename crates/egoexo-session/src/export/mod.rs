@@ -1,7 +1,7 @@
 //! Motion exporters: an [`SmplMotion`] in, the bytes of a file other tools read out.
 //!
 //! Every exporter works in memory (no paths, no clock, no threads), so the CLI and the
-//! browser's worker call the same code: [`write`] with a [`Format`], usually from a file
+//! browser's worker call the same code: [`write()`] with a [`Format`], usually from a file
 //! name's extension ([`Format::from_path`]).
 //!
 //! | format | module | world axes | units | what it holds |

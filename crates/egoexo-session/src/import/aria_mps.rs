@@ -123,7 +123,14 @@ pub(crate) fn load_device(
         Some(path) => Some(read_online_calibration(&dir.display_path(path), &dir.read_text(path)?)?),
         None => None,
     };
-    let calibration_name = || dir.display_path(files.calibration.as_deref().unwrap_or(CALIBRATION_FILE));
+    // Where the calibration is (or, when missing, would be): next to the trajectory.
+    let calibration_name = || match &files.calibration {
+        Some(path) => dir.display_path(path),
+        None => {
+            let slam_dir = files.trajectory.strip_suffix(TRAJECTORY_FILE).unwrap_or_default();
+            dir.display_path(&format!("{slam_dir}{CALIBRATION_FILE}"))
+        }
+    };
     let (t_device_cpf, camera) = match (&records, role) {
         (Some(records), _) => {
             let middle = &records[records.len() / 2];

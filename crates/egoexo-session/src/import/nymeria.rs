@@ -190,7 +190,11 @@ pub fn read_nymeria_smpl(file: &str, npz: &Npz) -> Result<(SmplMotion, Vec<Impor
     let mut intervals: Vec<i64> = times.windows(2).map(|w| w[1] - w[0]).collect();
     intervals.sort_unstable();
     let median = intervals[intervals.len() / 2].max(1);
-    let fps = 1e9 / median as f64;
+    // The rate whose grid runs from the first to the last sample: the median interval,
+    // adjusted so that microsecond rounding of the timestamps does not drop the last frame.
+    let span = times[n - 1] - times[0];
+    let steps = (span as f64 / median as f64).round().max(1.0);
+    let fps = steps * 1e9 / span as f64;
     if fps > MAX_BODY_RATE_HZ {
         return Err(ImportError::invalid(
             file,
@@ -235,8 +239,7 @@ pub fn read_nymeria_smpl(file: &str, npz: &Npz) -> Result<(SmplMotion, Vec<Impor
 
     // Resample onto start + round(k · 1e9 / fps).
     let start = times[0];
-    let span = times[n - 1] - start;
-    let frames = (span as f64 * fps / 1e9).floor() as usize + 1;
+    let frames = steps as usize + 1;
     if frames > 2 * n + 16 {
         return Err(ImportError::invalid(
             file,

@@ -1,0 +1,60 @@
+//! Arguments shared by the commands that read a session (`inspect`, `convert`).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use egoexo_session::aria::trajectory::Clock;
+use egoexo_session::import::{ImportOptions, Imported, KeypointFile, import_path};
+use egoexo_session::keypoints::CocoTiming;
+
+/// Which MPS timestamp column puts the devices on one clock.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ClockArg {
+    /// `tracking_timestamp_us`: each device's own clock (mapped by time_sync.csv files if present).
+    Device,
+    /// `utc_timestamp_ns`: wall-clock time.
+    Utc,
+}
+
+#[derive(Clone, Debug, clap::Args)]
+pub struct SessionInput {
+    /// A `.egoexo` (zip or folder), an Aria MPS folder (one device, or the multi-device layout
+    /// wearer/ + observers/<id>/), a Nymeria sequence folder, or a zip of any of them.
+    pub session: PathBuf,
+    /// Attach a keypoint file to an observer: `<observer-id>=<file>` (JSON lines, or COCO
+    /// JSON). Repeatable; replaces keypoints the session already has.
+    #[arg(long = "keypoints", value_name = "ID=FILE")]
+    pub keypoints: Vec<String>,
+    /// Which MPS timestamps to use.
+    #[arg(long, value_enum, default_value_t = ClockArg::Device)]
+    pub clock: ClockArg,
+    /// Frame rate of the image sequences COCO keypoint files number.
+    #[arg(long, default_value_t = 30.0, value_name = "FPS")]
+    pub coco_fps: f64,
+    /// Session-clock time (ns) of COCO frame 0 [default: the observer trajectory's first timestamp].
+    #[arg(long, value_name = "NS", allow_negative_numbers = true)]
+    pub coco_start_ns: Option<i64>,
+}
+
+impl SessionInput {
+    /// Imports the session with the chosen options.
+    pub fn import(&self) -> Result<Imported> {
+        let mut keypoint_files = Vec::new();
+        for spec in &self.keypoints {
+            let Some((id, path)) = spec.split_once('=') else {
+                bail!("--keypoints {spec:?}: expected <observer-id>=<file>");
+            };
+            let bytes = std::fs::read(path).with_context(|| format!("cannot read keypoint file {path}"))?;
+            keypoint_files.push(KeypointFile { observer_id: id.to_owned(), name: path.to_owned(), bytes });
+        }
+        let options = ImportOptions {
+            clock: match self.clock {
+                ClockArg::Device => Clock::Device,
+                ClockArg::Utc => Clock::Utc,
+            },
+            coco: CocoTiming { fps: self.coco_fps, start_ns: self.coco_start_ns },
+            keypoint_files,
+        };
+        Ok(import_path(&self.session, &options)?)
+    }
+}

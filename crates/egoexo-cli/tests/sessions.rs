@@ -1,0 +1,171 @@
+//! `egoexo inspect` and `egoexo convert`, run as the real binary on the session fixtures.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+fn fixtures() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../egoexo-session/tests/fixtures")
+}
+
+fn egoexo(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_egoexo")).args(args).output().unwrap()
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A fresh scratch directory for one test.
+fn scratch(name: &str) -> PathBuf {
+    static N: AtomicUsize = AtomicUsize::new(0);
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!(
+        "cli-sessions-{name}-{}-{}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    ));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), target).unwrap();
+        }
+    }
+}
+
+fn path_str(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn inspect_reports_devices_rates_observers_coverage_and_problems() {
+    let o = egoexo(&["inspect", path_str(&fixtures().join("aria_mps"))]);
+    let out = stdout(&o);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for needle in [
+        "aria_mps — multi-device Aria MPS folder",
+        "head         101 poses, 2.000 s, 50.0 Hz, +0.000 s .. +2.000 s",
+        "Observers (2)",
+        "camera fisheye624 1408×1408",
+        "keypoints: 61 frames, 2.000 s, 30.0 Hz",
+        "Problems (1):",
+        "kept the highest-scoring person per frame",
+    ] {
+        assert!(out.contains(needle), "missing {needle:?} in\n{out}");
+    }
+    let row = out.lines().find(|l| l.trim_start().starts_with("observer-2/keypoints ")).unwrap();
+    let cells: Vec<&str> = row.split_whitespace().collect();
+    assert_eq!(cells, ["observer-2/keypoints", "61", "/", "61", "100.0%"]);
+}
+
+#[test]
+fn inspect_nymeria_with_side_keypoints_and_json() {
+    let f = fixtures();
+    let kp = format!("observer={}", path_str(&f.join("nymeria_observer_keypoints.jsonl")));
+    let o = egoexo(&["inspect", path_str(&f.join("nymeria")), "--keypoints", &kp, "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["source"], "Nymeria sequence");
+    assert_eq!(v["ground_truth_frames"], 61);
+    assert_eq!(v["observers"][0]["keypoints"]["samples"], 61);
+    assert_eq!(v["wearer"]["left_wrist"]["samples"], 101);
+    let coverage = v["coverage"].as_array().unwrap();
+    assert!(coverage.iter().all(|c| c["valid_frames"] == c["frames"]), "{coverage:?}");
+    assert!(v["problems"].as_array().unwrap().iter().any(|p| p.as_str().unwrap().contains("mean-shape skeleton")));
+}
+
+#[test]
+fn convert_writes_an_egoexo_that_inspect_accepts() {
+    let dir = scratch("convert");
+    for (input, extra) in [
+        ("aria_mps", vec![]),
+        (
+            "nymeria",
+            vec![
+                "--keypoints".to_owned(),
+                format!("observer={}", path_str(&fixtures().join("nymeria_observer_keypoints.jsonl"))),
+            ],
+        ),
+    ] {
+        let out = dir.join(format!("{input}.egoexo"));
+        let mut args = vec![
+            "convert".to_owned(),
+            path_str(&fixtures().join(input)).to_owned(),
+            "-o".into(),
+            path_str(&out).to_owned(),
+        ];
+        args.extend(extra);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = egoexo(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(stdout(&o).contains("wrote"), "{}", stdout(&o));
+        let o = egoexo(&["inspect", path_str(&out)]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let text = stdout(&o);
+        assert!(text.contains(".egoexo session"), "{text}");
+        assert!(text.contains("keypoints: 61 frames"), "{text}");
+        // Writing over it needs --force.
+        let o = egoexo(&args);
+        assert_eq!(o.status.code(), Some(1));
+        assert!(stderr(&o).contains("exists; pass --force"), "{}", stderr(&o));
+    }
+    // The folder form, converted again to a zip, still inspects the same.
+    let folder = dir.join("folder.egoexo");
+    let o = egoexo(&["convert", path_str(&dir.join("nymeria.egoexo")), "-o", path_str(&folder), "--folder"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(folder.join("session.json").is_file() && folder.join("ground_truth.npz").is_file());
+    let o = egoexo(&["inspect", path_str(&folder)]);
+    assert!(stdout(&o).contains("Ground truth: 61 SMPL frames"), "{}", stdout(&o));
+}
+
+#[test]
+fn invalid_input_exits_1_with_the_error_on_stderr() {
+    let dir = scratch("invalid");
+    let session = dir.join("aria");
+    copy_dir(&fixtures().join("aria_mps"), &session);
+    let csv = session.join("observers/observer-1/mps/slam/closed_loop_trajectory.csv");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    let mut fields: Vec<&str> = lines[7].split(',').collect();
+    fields[4] = "NaN";
+    lines[7] = fields.join(",");
+    std::fs::write(&csv, lines.join("\n")).unwrap();
+    for command in ["inspect", "convert"] {
+        let out = dir.join("out.egoexo");
+        let args: Vec<&str> = if command == "inspect" {
+            vec!["inspect", path_str(&session)]
+        } else {
+            vec!["convert", path_str(&session), "-o", path_str(&out)]
+        };
+        let o = egoexo(&args);
+        assert_eq!(o.status.code(), Some(1), "{command}");
+        assert!(stdout(&o).is_empty(), "{command}: {}", stdout(&o));
+        assert!(
+            stderr(&o).contains(
+                "error: observers/observer-1/mps/slam/closed_loop_trajectory.csv, line 8, field `ty_world_device`: expected a finite number, got `NaN`"
+            ),
+            "{command}: {}",
+            stderr(&o)
+        );
+        assert!(!out.exists());
+    }
+    let o = egoexo(&["inspect", path_str(&dir.join("does-not-exist"))]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("expected an existing file or folder"), "{}", stderr(&o));
+    let o = egoexo(&["inspect", path_str(&fixtures().join("aria_mps")), "--keypoints", "observer-1"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("expected <observer-id>=<file>"), "{}", stderr(&o));
+}

@@ -1,0 +1,163 @@
+//! Property: writing any valid session as `.egoexo` (zip or folder) and reading it back gives
+//! the same session, bit for bit.
+
+mod support;
+
+use egoexo_core::camera::{CameraCalibration, Fisheye624, Pinhole, Projection};
+use egoexo_core::exo_keypoints::Keypoint2d;
+use egoexo_core::glam::{Quat, Vec2, Vec3};
+use egoexo_core::motion::SmplMotion;
+use egoexo_core::rigid::RigidTransform;
+use egoexo_core::skeleton::{SmplPose, SmplSkeleton};
+use egoexo_session::format::{read_egoexo, write_egoexo_files, write_egoexo_zip};
+use egoexo_session::import::{ImportOptions, import_session};
+use egoexo_session::model::*;
+use egoexo_session::{FileTree, Limits};
+use proptest::prelude::*;
+
+fn quat() -> impl Strategy<Value = Quat> {
+    (-1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0)
+        .prop_filter("non-degenerate", |(x, y, z, w)| x * x + y * y + z * z + w * w > 0.01)
+        .prop_map(|(x, y, z, w)| Quat::from_xyzw(x, y, z, w).normalize())
+}
+
+fn pose() -> impl Strategy<Value = RigidTransform> {
+    (quat(), -50.0f32..50.0, -5.0f32..5.0, -50.0f32..50.0)
+        .prop_map(|(q, x, y, z)| RigidTransform { rotation: q, translation: Vec3::new(x, y, z) })
+}
+
+/// Strictly increasing timestamps: the first within 10 ms after `start`, then steps of
+/// 10–50 ms (so every stream of ≥ 2 samples overlaps every other: one clock).
+fn timestamps(n: std::ops::Range<usize>, start: i64) -> impl Strategy<Value = Vec<i64>> {
+    (prop::collection::vec(10_000_000i64..50_000_000, n), 0i64..10_000_000).prop_map(move |(deltas, offset)| {
+        let mut t = start + offset;
+        deltas
+            .iter()
+            .enumerate()
+            .map(|(i, d)| {
+                if i > 0 {
+                    t += d;
+                }
+                t
+            })
+            .collect()
+    })
+}
+
+fn trajectory(start: i64) -> impl Strategy<Value = Trajectory> {
+    timestamps(2..30, start).prop_flat_map(|ts| {
+        let n = ts.len();
+        (Just(ts), prop::collection::vec(pose(), n))
+            .prop_map(|(timestamps_ns, poses)| Trajectory { timestamps_ns, poses })
+    })
+}
+
+fn camera() -> impl Strategy<Value = CameraCalibration> {
+    let projection = prop_oneof![
+        (300.0f32..900.0, 200.0f32..800.0).prop_map(|(f, c)| {
+            let mut p = support::RGB_PARAMS;
+            p[0] = f;
+            p[1] = c;
+            Projection::Fisheye624(Fisheye624::new(p).unwrap())
+        }),
+        (100.0f32..2000.0, 100.0f32..2000.0, 0.0f32..1000.0, 0.0f32..1000.0)
+            .prop_map(|(fx, fy, cx, cy)| Projection::Pinhole(Pinhole::new(fx, fy, cx, cy).unwrap())),
+    ];
+    (projection, 1u32..4000, 1u32..4000, pose(), prop::option::of(10.0f32..2000.0)).prop_map(|(p, w, h, t, r)| {
+        let c = CameraCalibration::new(p, w, h, t).unwrap();
+        match r {
+            Some(r) => c.with_valid_radius(r),
+            None => c,
+        }
+    })
+}
+
+fn keypoints(start: i64) -> impl Strategy<Value = KeypointTrack> {
+    timestamps(2..20, start).prop_flat_map(|ts| {
+        let n = ts.len();
+        let kp = prop::option::of((-100.0f32..2000.0, -100.0f32..2000.0, 0.0f32..=1.0))
+            .prop_map(|o| o.map(|(x, y, s)| Keypoint2d { pixel: Vec2::new(x, y), score: s }));
+        (Just(ts), prop::collection::vec(prop::array::uniform17(kp), n))
+            .prop_map(|(timestamps_ns, frames)| KeypointTrack { timestamps_ns, frames })
+    })
+}
+
+fn context(start: i64) -> impl Strategy<Value = ContextFeatureTrack> {
+    (timestamps(1..6, start), 1usize..8).prop_flat_map(|(ts, dim)| {
+        let n = ts.len();
+        (Just(ts), Just(dim), prop::collection::vec(-10.0f32..10.0, n * dim))
+            .prop_map(|(timestamps_ns, dim, values)| ContextFeatureTrack { timestamps_ns, dim, values })
+    })
+}
+
+const START: i64 = 1_000_000_000;
+
+fn observer(index: usize) -> impl Strategy<Value = Observer> {
+    (trajectory(START), camera(), prop::option::of(keypoints(START)), prop::option::of(context(START)), any::<bool>())
+        .prop_map(move |(head, camera, keypoints, context_features, video)| Observer {
+            id: format!("obs-{index}"),
+            head,
+            camera,
+            keypoints,
+            video: video.then(|| VideoRef { path: format!("videos/obs-{index}.mp4"), start_ns: START + 5 }),
+            context_features,
+        })
+}
+
+fn smpl_pose() -> impl Strategy<Value = SmplPose> {
+    (quat(), prop::array::uniform21(quat()), -5.0f32..5.0, 0.0f32..2.0, -5.0f32..5.0)
+        .prop_map(|(r, body, x, y, z)| SmplPose { root_orientation: r, body, translation: Vec3::new(x, y, z) })
+}
+
+fn session() -> impl Strategy<Value = Session> {
+    let observers = (0usize..3).prop_flat_map(|n| (0..n).map(observer).collect::<Vec<_>>());
+    let wrists = prop::option::of((trajectory(START), trajectory(START)));
+    let subject =
+        (prop::option::of(1.0f32..2.2), prop::option::of(prop::collection::vec(-3.0f32..3.0, 1..16)), any::<bool>())
+            .prop_map(|(height_m, betas, joints)| SubjectInfo {
+                height_m,
+                betas,
+                rest_joints: joints.then(|| SmplSkeleton::mean_shape().scaled(1.05).rest_joints().to_owned()),
+            });
+    let gt = prop::option::of((prop::collection::vec(smpl_pose(), 1..12), 10.0f32..120.0, any::<u16>()));
+    (trajectory(START), wrists, observers, subject, gt, "[a-z][a-z0-9_-]{0,12}").prop_map(
+        |(head, wrists, observers, subject, gt, name)| {
+            let ground_truth = gt.map(|(poses, fps, mask)| {
+                let n = poses.len();
+                let motion =
+                    SmplMotion::new(fps, START + 10_000_000, SmplSkeleton::mean_shape(), Some(vec![0.5, -0.25]), poses)
+                        .unwrap();
+                let occlusion = observers
+                    .iter()
+                    .take(1)
+                    .map(|o| ObserverOcclusion { observer_id: o.id.clone(), occluded: vec![mask & 0x1fff; n] })
+                    .collect();
+                GroundTruth { motion, occlusion }
+            });
+            let (left_wrist, right_wrist) = match wrists {
+                Some((l, r)) => (Some(l), Some(r)),
+                None => (None, None),
+            };
+            Session {
+                name,
+                wearer: Wearer { head, left_wrist, right_wrist, head_joint_in_device: Vec3::new(0.01, -0.06, -0.09) },
+                observers,
+                subject,
+                ground_truth,
+            }
+        },
+    )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    #[test]
+    fn write_then_read_is_the_identity(s in session()) {
+        let zip = write_egoexo_zip(&s).unwrap();
+        let imported = import_session(&FileTree::from_zip("s.egoexo", zip, Limits::default()).unwrap(), &ImportOptions::default()).unwrap();
+        prop_assert_eq!(&imported.session, &s);
+        let (from_folder, _) = read_egoexo(&support::tree("s", write_egoexo_files(&s).unwrap())).unwrap();
+        prop_assert_eq!(&from_folder, &s);
+    }
+}

@@ -1,0 +1,85 @@
+//! `docs/session-format.md` is true: its JSON Schema accepts its example and every manifest
+//! the writer produces, rejects broken ones, and the example reads.
+
+mod support;
+
+use egoexo_session::format::{read_egoexo, write_egoexo_files};
+use egoexo_session::import::{ImportOptions, import_session};
+use serde_json::Value;
+use support::*;
+
+/// The fenced block whose info string is exactly `info` (e.g. "json schema").
+fn doc_block(info: &str) -> Value {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/session-format.md");
+    let doc = std::fs::read_to_string(&path).unwrap();
+    let fence = format!("```{info}\n");
+    let start = doc.find(&fence).unwrap_or_else(|| panic!("no ```{info} block in {}", path.display())) + fence.len();
+    let end = start + doc[start..].find("\n```").unwrap();
+    serde_json::from_str(&doc[start..end]).unwrap_or_else(|e| panic!("```{info} block: {e}"))
+}
+
+fn validator() -> jsonschema::Validator {
+    jsonschema::validator_for(&doc_block("json schema")).expect("the schema compiles")
+}
+
+fn assert_valid(v: &jsonschema::Validator, manifest: &Value, what: &str) {
+    let errors: Vec<String> = v.iter_errors(manifest).map(|e| format!("{} at {}", e, e.instance_path())).collect();
+    assert!(errors.is_empty(), "{what} fails the schema:\n{}", errors.join("\n"));
+}
+
+#[test]
+fn the_example_validates_and_reads() {
+    let v = validator();
+    let example = doc_block("json example");
+    assert_valid(&v, &example, "the documented example");
+    // With the fixture's data files, the example manifest reads.
+    let mut files = egoexo_fixture_files();
+    files.insert("session.json".into(), serde_json::to_vec_pretty(&example).unwrap());
+    let (session, warnings) = read_egoexo(&tree("example", files)).unwrap();
+    assert!(warnings.is_empty(), "{warnings:?}");
+    assert_eq!(session.observers.len(), 2);
+    assert_eq!(session.ground_truth.unwrap().occlusion[0].observer_id, "observer-1");
+}
+
+#[test]
+fn written_manifests_validate() {
+    let v = validator();
+    let nymeria = import_session(&tree("nymeria", nymeria_fixture()), &ImportOptions::default()).unwrap().session;
+    for (what, files) in
+        [("aria + ground truth", egoexo_fixture_files()), ("nymeria", write_egoexo_files(&nymeria).unwrap())]
+    {
+        let manifest: Value = serde_json::from_slice(&files["session.json"]).unwrap();
+        assert_valid(&v, &manifest, what);
+    }
+}
+
+#[test]
+fn the_schema_rejects_broken_manifests() {
+    let v = validator();
+    let example = doc_block("json example");
+    type Edit = Box<dyn Fn(&mut Value)>;
+    let broken: Vec<(&str, Edit)> = vec![
+        ("version 2", Box::new(|m| m["version"] = 2.into())),
+        (
+            "missing wearer",
+            Box::new(|m| {
+                m.as_object_mut().unwrap().remove("wearer");
+            }),
+        ),
+        ("path with ..", Box::new(|m| m["wearer"]["head"] = "../x.csv".into())),
+        ("absolute path", Box::new(|m| m["observers"][0]["trajectory"] = "/x.csv".into())),
+        (
+            "fisheye with 4 params",
+            Box::new(|m| m["observers"][0]["camera"]["params"] = serde_json::json!([1, 2, 3, 4])),
+        ),
+        ("observer id with a space", Box::new(|m| m["observers"][0]["id"] = "a b".into())),
+        ("unknown field", Box::new(|m| m["extra"] = 1.into())),
+        ("z-up world", Box::new(|m| m["conventions"]["world"] = "z_up".into())),
+        ("stature in cm", Box::new(|m| m["subject"]["height_m"] = 170.into())),
+    ];
+    for (what, edit) in broken {
+        let mut m = example.clone();
+        edit(&mut m);
+        assert!(!v.is_valid(&m), "the schema accepts a manifest with {what}");
+    }
+}

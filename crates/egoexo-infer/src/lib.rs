@@ -7,6 +7,7 @@
 //! - [`manifest`] — `models/manifest.json`.
 //! - [`baselines`] — rest pose and nearest neighbour.
 //! - [`pipeline`] — [`Engine::reconstruct`]: aligned session → [`Reconstruction`].
+//! - [`scene`] — the viewer's [`egoexo_scene::SceneData`] from a reconstruction.
 //!
 //! Nothing here does I/O (models arrive as bytes), spawns threads or reads the clock, so the
 //! same engine runs in the browser's Web Worker.
@@ -16,6 +17,7 @@ pub mod inputs;
 pub mod manifest;
 pub mod models;
 pub mod pipeline;
+pub mod scene;
 pub mod windows;
 
 pub use pipeline::{Engine, Method, ObserverGates, Progress, ReconstructOptions, Reconstruction, Stage};

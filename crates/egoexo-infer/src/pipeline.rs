@@ -225,7 +225,7 @@ impl Engine {
                 Method::NearestNeighbour => nearest
                     .ok_or(InferError::NoNearestNeighbourIndex { points: tracking.points() })?
                     .window_poses(&window),
-                _ => run_egonet(models.ok_or(InferError::NoModels { points: tracking.points() })?, &window)?,
+                _ => coarse_pose(models.ok_or(InferError::NoModels { points: tracking.points() })?, &window)?,
             };
             windows.push((window, coarse));
             if !progress(Progress { stage: Stage::Ego, done: i + 1, total: plans.len() }) {
@@ -354,7 +354,9 @@ pub fn observer_order(aligned: &AlignedSession) -> Vec<usize> {
     order.into_iter().map(|(i, _)| i).collect()
 }
 
-fn run_egonet(models: &ModelSet, window: &EgoWindow) -> Result<Vec<f32>, InferError> {
+/// EgoNet's coarse pose for one window: `WINDOW × POSE_DIM`, root orientation in the window
+/// frame.
+pub fn coarse_pose(models: &ModelSet, window: &EgoWindow) -> Result<Vec<f32>, InferError> {
     let out = models.egonet.run(&[&window.ego])?;
     concat_pose(models.egonet.name(), &out)
 }

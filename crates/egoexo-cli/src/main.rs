@@ -25,6 +25,10 @@ enum Command {
     Convert(commands::convert::Args),
     /// The CMU motion library: `mocap import` retargets ASF/AMC to SMPL, `mocap info` summarises it.
     Mocap(commands::mocap::Args),
+    /// Simulate ego-exo sessions (or training shards) from motion-library subjects.
+    Synth(commands::synth::Args),
+    /// Score reconstruction methods on simulated sessions with the paper's metrics.
+    Eval(commands::eval::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -33,6 +37,8 @@ fn main() -> std::process::ExitCode {
         Command::Inspect(args) => commands::inspect::run(args),
         Command::Convert(args) => commands::convert::run(args),
         Command::Mocap(args) => commands::mocap::run(args),
+        Command::Synth(args) => commands::synth::run(args),
+        Command::Eval(args) => commands::eval::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

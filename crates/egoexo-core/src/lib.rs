@@ -27,6 +27,7 @@
 pub mod camera;
 pub mod ego_features;
 pub mod exo_keypoints;
+pub mod gate_features;
 pub mod metrics;
 pub mod motion;
 pub mod rays;

@@ -76,6 +76,17 @@ impl SmplMotion {
         self.start_ns + (i as f64 * 1e9 / f64::from(self.fps)).round() as i64
     }
 
+    /// The motion mirrored left↔right across the world's YZ plane (see [`SmplPose::mirrored`]).
+    pub fn mirrored(&self) -> Self {
+        Self {
+            fps: self.fps,
+            start_ns: self.start_ns,
+            skeleton: self.skeleton.mirrored(),
+            betas: self.betas.clone(),
+            poses: self.poses.iter().map(SmplPose::mirrored).collect(),
+        }
+    }
+
     /// World positions of the 24 joints of every frame (forward kinematics).
     pub fn joint_positions(&self) -> Vec<[Vec3; NUM_JOINTS]> {
         self.poses.iter().map(|p| self.skeleton.forward_kinematics(p).positions).collect()

@@ -123,6 +123,16 @@ pub const MEAN_SHAPE_REST_JOINTS: [[f32; 3]; NUM_JOINTS] = [
 /// shape is known; the ratio of stature to [`SmplSkeleton::head_height`] is what matters.
 pub const MEAN_SHAPE_STATURE_M: f32 = 1.70;
 
+/// The joint that mirrors each joint left↔right (itself for the spine, neck, head and pelvis).
+pub const MIRRORED_JOINT: [usize; NUM_JOINTS] =
+    [0, 2, 1, 3, 5, 4, 6, 8, 7, 9, 11, 10, 12, 14, 13, 15, 17, 16, 19, 18, 21, 20, 23, 22];
+
+/// The rotation `M R M` for the reflection `M = diag(−1, 1, 1)` (the world mirrored across
+/// its YZ plane): quaternion `(x, y, z, w) ↦ (x, −y, −z, w)`.
+pub fn mirror_rotation(q: Quat) -> Quat {
+    Quat::from_xyzw(q.x, -q.y, -q.z, q.w)
+}
+
 /// Default position of the SMPL head joint in the head-device (CPF) frame, metres, for the mean
 /// shape: glasses sit about 9 cm in front of and 6 cm above the head joint (the head joint is
 /// near the top of the neck, between the ears). Used when a session does not calibrate it;
@@ -198,6 +208,17 @@ impl SmplPose {
         self.root_orientation.is_finite() && self.translation.is_finite() && self.body.iter().all(|q| q.is_finite())
     }
 
+    /// The pose mirrored across the world's YZ plane (`x ↦ −x`), left and right swapped: on
+    /// the [mirrored skeleton](SmplSkeleton::mirrored) its joint `j` lands where this pose's
+    /// joint [`MIRRORED_JOINT`]`[j]` lands, reflected. A data augmentation for training.
+    pub fn mirrored(&self) -> Self {
+        Self {
+            root_orientation: mirror_rotation(self.root_orientation),
+            body: std::array::from_fn(|i| mirror_rotation(self.body[MIRRORED_JOINT[i + 1] - 1])),
+            translation: Vec3::new(-self.translation.x, self.translation.y, self.translation.z),
+        }
+    }
+
     /// Interpolates from `self` (`alpha = 0`) to `other` (`alpha = 1`): every rotation (root and
     /// the 21 local ones) by slerp along the shortest arc, the translation linearly. Used to
     /// resample motions between frames.
@@ -237,6 +258,17 @@ impl SmplSkeleton {
             }
         }
         Ok(Self { rest_joints })
+    }
+
+    /// The skeleton mirrored across its YZ plane with left and right swapped (for a
+    /// symmetric body, itself).
+    pub fn mirrored(&self) -> Self {
+        Self {
+            rest_joints: std::array::from_fn(|j| {
+                let p = self.rest_joints[MIRRORED_JOINT[j]];
+                Vec3::new(-p.x, p.y, p.z)
+            }),
+        }
     }
 
     /// Rest joint positions (metres, body frame).
@@ -346,7 +378,8 @@ mod tests {
     #[test]
     fn pose_interpolation_endpoints_midpoint_and_short_arc() {
         let a = SmplPose { root_orientation: Quat::from_rotation_y(0.2), ..SmplPose::rest() };
-        let mut b = SmplPose { root_orientation: -Quat::from_rotation_y(0.6), translation: Vec3::X, ..SmplPose::rest() };
+        let mut b =
+            SmplPose { root_orientation: -Quat::from_rotation_y(0.6), translation: Vec3::X, ..SmplPose::rest() };
         b.body[3] = Quat::from_rotation_z(1.0);
         let mid = a.interpolate(&b, 0.5);
         assert!(crate::rotation::angle_between(mid.root_orientation, Quat::from_rotation_y(0.4)) < 1e-5);

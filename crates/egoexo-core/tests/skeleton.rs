@@ -10,7 +10,9 @@ use wasm_bindgen_test::wasm_bindgen_test as test;
 use common::*;
 use egoexo_core::glam::{Quat, Vec3};
 use egoexo_core::rigid::RigidTransform;
-use egoexo_core::skeleton::{JOINT_NAMES, NUM_BODY_JOINTS, NUM_JOINTS, PARENTS, SmplJoint, SmplPose, SmplSkeleton};
+use egoexo_core::skeleton::{
+    JOINT_NAMES, MIRRORED_JOINT, NUM_BODY_JOINTS, NUM_JOINTS, PARENTS, SmplJoint, SmplPose, SmplSkeleton,
+};
 use proptest::prelude::*;
 
 fn body_pose() -> impl Strategy<Value = [Quat; NUM_BODY_JOINTS]> {
@@ -109,6 +111,21 @@ proptest! {
             let expected = moved_pelvis + extra.rotation * (fk.positions[j] - pelvis);
             prop_assert!(fk2.positions[j].abs_diff_eq(expected, 1e-4));
         }
+    }
+
+    #[test]
+    fn mirrored_pose_is_the_reflected_body_with_sides_swapped(pose in pose(), scale in 0.8f32..1.2) {
+        let skeleton = SmplSkeleton::mean_shape().scaled(scale);
+        let fk = skeleton.forward_kinematics(&pose);
+        let mirrored = skeleton.mirrored().forward_kinematics(&pose.mirrored());
+        for j in 0..NUM_JOINTS {
+            let p = fk.positions[MIRRORED_JOINT[j]];
+            prop_assert!(mirrored.positions[j].abs_diff_eq(Vec3::new(-p.x, p.y, p.z), 1e-4), "{}", JOINT_NAMES[j]);
+        }
+        // Mirroring twice gives back the pose.
+        let twice = pose.mirrored().mirrored();
+        prop_assert!(same_rotation(twice.root_orientation, pose.root_orientation, 1e-5));
+        prop_assert!(twice.translation.abs_diff_eq(pose.translation, 1e-6));
     }
 
     #[test]

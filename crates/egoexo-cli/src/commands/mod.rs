@@ -1,6 +1,10 @@
 //! One module per subcommand.
 
 pub mod convert;
+pub mod eval;
 pub mod inspect;
 pub mod mocap;
+pub mod models;
 pub mod session_input;
+pub mod synth;
+pub mod tracking;

@@ -1,0 +1,142 @@
+//! `egoexo synth`: simulated sessions (`.egoexo`) or training shards from the motion library.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use egoexo_core::TrackingMode;
+use egoexo_dataset::shards::{ShardOptions, ShardStage, write_shards};
+use egoexo_session::format::save_egoexo;
+use egoexo_synth::{SynthConfig, simulate};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use super::models::{load_model_set, models_dir, read_manifest};
+use super::tracking::TrackingArg;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum StageArg {
+    /// EgoNet inputs and targets.
+    Ego,
+    /// Everything the gate and fusion networks read (needs a trained EgoNet: --models).
+    Fusion,
+}
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The motion library (`egoexo mocap import`).
+    #[arg(long)]
+    pub lib: PathBuf,
+    /// CMU subject numbers to simulate, comma-separated (e.g. `2,5`).
+    #[arg(long, value_delimiter = ',', required = true)]
+    pub subjects: Vec<u32>,
+    /// Observers per session (for shards: the most per session, and the networks' slots).
+    #[arg(long, default_value_t = 1)]
+    pub observers: usize,
+    /// Wearer tracking: 1 (glasses) or 3 (glasses + wrists).
+    #[arg(long, value_enum, default_value = "3")]
+    pub tracking: TrackingArg,
+    #[arg(long, default_value_t = 7)]
+    pub seed: u64,
+    /// Output folder.
+    #[arg(short = 'o', long)]
+    pub out: PathBuf,
+    /// Write training shards of this stage instead of sessions.
+    #[arg(long, value_enum)]
+    pub shards: Option<StageArg>,
+    /// Models folder whose EgoNet makes the fusion shards' coarse poses.
+    #[arg(long)]
+    pub models: Option<PathBuf>,
+    /// Shards: simulations of every clip.
+    #[arg(long, default_value_t = 3)]
+    pub simulations: usize,
+    /// Shards: frames between training windows.
+    #[arg(long, default_value_t = 24)]
+    pub stride: usize,
+    /// Shards: do not add left↔right mirrored copies of the motions.
+    #[arg(long)]
+    pub no_mirror: bool,
+    /// Sessions: write folders instead of zip files.
+    #[arg(long)]
+    pub folders: bool,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let library =
+        egoexo_mocap::fs::open_library(&args.lib).with_context(|| format!("opening {}", args.lib.display()))?;
+    let clips = library.clips_of_subjects(&args.subjects);
+    if clips.is_empty() {
+        bail!("{} has no clips of subjects {:?} (it has {:?})", args.lib.display(), args.subjects, library.subjects());
+    }
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let tracking = TrackingMode::from(args.tracking);
+    let bar = ProgressBar::new(clips.len() as u64).with_style(
+        ProgressStyle::with_template("{msg} {bar:40} {pos}/{len} clips [{elapsed_precise}]")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+
+    if let Some(stage) = args.shards {
+        let stage = match stage {
+            StageArg::Ego => ShardStage::Ego,
+            StageArg::Fusion => ShardStage::Fusion,
+        };
+        let egonet = match stage {
+            ShardStage::Ego => None,
+            ShardStage::Fusion => {
+                let dir = models_dir(args.models.as_deref());
+                let manifest = read_manifest(&dir)?;
+                Some(
+                    load_model_set(&dir, &manifest, tracking)?
+                        .with_context(|| format!("{} has no {}-point models", dir.display(), tracking.points()))?,
+                )
+            }
+        };
+        let options = ShardOptions {
+            tracking,
+            max_observers: args.observers.max(1),
+            observers: (0, args.observers.max(1)),
+            simulations_per_clip: args.simulations.max(1),
+            stride: args.stride.max(1),
+            seed: args.seed,
+            mirror: !args.no_mirror,
+            ..ShardOptions::default()
+        };
+        bar.set_message("shards");
+        let out = args.out.clone();
+        let index = write_shards(
+            &library,
+            &clips,
+            stage,
+            &options,
+            egonet.as_ref(),
+            &mut |name, bytes| {
+                std::fs::write(out.join(name), bytes)
+                    .map_err(|e| egoexo_dataset::DatasetError::Write(format!("{name}: {e}")))
+            },
+            &mut |done, _| bar.set_position(done as u64),
+        )?;
+        bar.finish();
+        println!(
+            "wrote {} windows in {} shards ({} simulated frames, subjects {:?}) to {}",
+            index.windows,
+            index.shards.len(),
+            index.frames_simulated,
+            index.subjects,
+            args.out.display()
+        );
+        return Ok(());
+    }
+
+    bar.set_message("sessions");
+    let config = SynthConfig { tracking, observers: args.observers, ..SynthConfig::default() };
+    for (i, &clip) in clips.iter().enumerate() {
+        let info = &library.clips()[clip];
+        let motion = library.motion(clip)?;
+        let name = info.label().replace('/', "-");
+        let sim = simulate(&motion, &name, &config, egoexo_dataset::shards::mix(args.seed, clip as u64, 0x5E55))?;
+        let path = args.out.join(if args.folders { name.clone() } else { format!("{name}.egoexo") });
+        save_egoexo(&sim.session, &path, args.folders).with_context(|| format!("writing {}", path.display()))?;
+        bar.set_position(i as u64 + 1);
+    }
+    bar.finish();
+    println!("wrote {} sessions to {}", clips.len(), args.out.display());
+    Ok(())
+}

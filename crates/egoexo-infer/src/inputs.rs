@@ -1,0 +1,246 @@
+//! The networks' inputs for one window, computed from an aligned session with the core's
+//! geometry — the one place they are assembled, used alike by reconstruction and by the
+//! training shards (`egoexo synth --shards`).
+//!
+//! Tensor layouts (batch 1, `T` = [`WINDOW`], `N` = observer slots, `K` = 13, row-major):
+//! - `ego` `[1, T, 60]` — [`egoexo_core::ego_features`] layout v1, window frame.
+//! - `egonet` `[1, T, 132]` — EgoNet's coarse pose in the window frame: root orientation 6D
+//!   then the 21 body rotations 6D ([`POSE_DIM`]).
+//! - `gate_features` `[1, T, N, K, F]` — [`egoexo_core::gate_features`] layout v1.
+//! - `rays` `[1, T, N, K, 3]` — canonical ray endpoints in the wearer's head frame (metres),
+//!   zero when invalid; `ray_valid` `[1, T, N, K]`.
+//! - `observer_mask` `[1, T, N]` — 1 where the slot holds an observer whose head is tracked and
+//!   at least one ray is valid at that frame.
+//!
+//! Padded frames (after a short span's last frame) repeat the last real frame's wearer poses
+//! and carry no exo evidence; `frame_mask` marks the real ones.
+
+use egoexo_core::camera::CameraCalibration;
+use egoexo_core::ego_features::{EGO_FEATURE_DIM, EgoTrajectories, TrackingMode, ego_features};
+use egoexo_core::exo_keypoints::{EXO_KEYPOINT_COUNT, exo_keypoints_from_smpl};
+use egoexo_core::gate_features::{GATE_FEATURE_DIM, gate_features};
+use egoexo_core::glam::{Quat, Vec3};
+use egoexo_core::rays::canonicalize_keypoints;
+use egoexo_core::region::{DEFAULT_REGION_MARGIN, propose_region};
+use egoexo_core::rigid::RigidTransform;
+use egoexo_core::rotation::Rot6d;
+use egoexo_core::skeleton::{NUM_BODY_JOINTS, NUM_JOINTS, SmplJoint, SmplPose, SmplSkeleton};
+use egoexo_session::align::AlignedSession;
+
+use crate::InferError;
+use crate::windows::{WINDOW, WindowPlan};
+
+/// Numbers per frame of a pose in 6D: root orientation (6) + 21 body rotations (126).
+pub const POSE_DIM: usize = 6 + 6 * NUM_BODY_JOINTS;
+
+/// The wearer's side of one window.
+#[derive(Clone, Debug)]
+pub struct EgoWindow {
+    pub plan: WindowPlan,
+    /// Maps window-frame points to the world.
+    pub t_world_window: RigidTransform,
+    /// `WINDOW × EGO_FEATURE_DIM`.
+    pub ego: Vec<f32>,
+    /// Head-device poses of the `WINDOW` frames (padded by repetition), `T_world_device`.
+    pub head: Vec<RigidTransform>,
+    /// 1 for real frames, 0 for padding (`WINDOW`).
+    pub frame_mask: Vec<f32>,
+}
+
+fn padded<T: Copy>(frames: &[T], len: usize) -> Vec<T> {
+    (0..len).map(|i| frames[i.min(frames.len() - 1)]).collect()
+}
+
+/// Ego features of one window. In 3-point mode the wrists must be tracked in every frame of
+/// the window (the planner only makes windows inside such spans).
+pub fn ego_window(
+    aligned: &AlignedSession,
+    plan: &WindowPlan,
+    tracking: TrackingMode,
+) -> Result<EgoWindow, InferError> {
+    if plan.frames.is_empty() || plan.frames.len() > WINDOW || plan.frames.end > aligned.head.poses.len() {
+        return Err(InferError::Window(format!(
+            "window {:?} does not fit the {}-frame timeline",
+            plan.frames,
+            aligned.head.poses.len()
+        )));
+    }
+    // One frame of history from inside the span, so the first frame's velocities are real.
+    let history = usize::from(plan.frames.start > plan.span.start);
+    let from = plan.frames.start - history;
+    let slice =
+        |poses: &[RigidTransform]| -> Vec<RigidTransform> { padded(&poses[from..plan.frames.end], WINDOW + history) };
+    let head = slice(&aligned.head.poses);
+    let wrists = match tracking {
+        TrackingMode::OnePoint => None,
+        TrackingMode::ThreePoint => {
+            let (Some(l), Some(r)) = (&aligned.left_wrist, &aligned.right_wrist) else {
+                return Err(InferError::MissingWrists);
+            };
+            Some((slice(&l.poses), slice(&r.poses)))
+        }
+    };
+    let trajectories = EgoTrajectories {
+        head: &head,
+        left_wrist: wrists.as_ref().map(|w| w.0.as_slice()),
+        right_wrist: wrists.as_ref().map(|w| w.1.as_slice()),
+    };
+    let features = ego_features(&trajectories, history..history + WINDOW, aligned.timeline.fps, tracking)?;
+    let frame_mask = (0..WINDOW).map(|i| f32::from(u8::from(i < plan.frames.len()))).collect();
+    Ok(EgoWindow {
+        plan: plan.clone(),
+        t_world_window: features.t_world_window,
+        ego: features.features,
+        head: head[history..].to_vec(),
+        frame_mask,
+    })
+}
+
+/// Decodes a `WINDOW × POSE_DIM` window-frame pose tensor into world SMPL poses, recovering
+/// each frame's root translation from the head device (`p_root = p_head − FK_head(θ)`).
+pub fn world_poses(
+    window: &EgoWindow,
+    poses_6d: &[f32],
+    skeleton: &SmplSkeleton,
+    head_joint_in_device: Vec3,
+) -> Vec<SmplPose> {
+    poses_6d
+        .chunks_exact(POSE_DIM)
+        .zip(&window.head)
+        .map(|(row, head)| {
+            let (root_window, body) = decode_pose(row);
+            let root_orientation = window.t_world_window.rotation * root_window;
+            let translation = skeleton.recover_translation(root_orientation, &body, head, head_joint_in_device);
+            SmplPose { root_orientation, body, translation }
+        })
+        .collect()
+}
+
+/// One frame's `POSE_DIM` numbers → (root orientation, body rotations).
+pub fn decode_pose(row: &[f32]) -> (Quat, [Quat; NUM_BODY_JOINTS]) {
+    let rot = |i: usize| {
+        let mut six = [0.0; 6];
+        six.copy_from_slice(&row[6 * i..6 * i + 6]);
+        Rot6d(six).to_quat()
+    };
+    (rot(0), std::array::from_fn(|j| rot(j + 1)))
+}
+
+/// One frame's pose → `POSE_DIM` numbers (root orientation given in the frame to encode in).
+pub fn encode_pose(root: Quat, body: &[Quat; NUM_BODY_JOINTS], out: &mut [f32]) {
+    out[0..6].copy_from_slice(&Rot6d::from_quat(root).0);
+    for (j, q) in body.iter().enumerate() {
+        out[6 + 6 * j..12 + 6 * j].copy_from_slice(&Rot6d::from_quat(*q).0);
+    }
+}
+
+/// The exo side of one window for `slots` observer slots.
+#[derive(Clone, Debug)]
+pub struct ExoWindow {
+    pub slots: usize,
+    /// Which session observer fills each slot.
+    pub slot_observer: Vec<Option<usize>>,
+    /// `[T, N, K, 3]`.
+    pub rays: Vec<f32>,
+    /// `[T, N, K]`.
+    pub ray_valid: Vec<f32>,
+    /// `[T, N, K, F]`.
+    pub gate_features: Vec<f32>,
+    /// `[T, N]`.
+    pub observer_mask: Vec<f32>,
+}
+
+impl ExoWindow {
+    /// Index of `(t, slot, k)` in `[T, N, K]` arrays.
+    pub fn index(&self, t: usize, slot: usize, k: usize) -> usize {
+        (t * self.slots + slot) * EXO_KEYPOINT_COUNT + k
+    }
+}
+
+/// Rays, validity, gate features and observer masks of one window, given the coarse world
+/// poses (EgoNet's, decoded with [`world_poses`]) for its `WINDOW` frames. Observers beyond
+/// `slots` are ignored; `observers` lists the session observers to place in the slots.
+pub fn exo_window(
+    aligned: &AlignedSession,
+    window: &EgoWindow,
+    coarse: &[SmplPose],
+    observers: &[usize],
+    slots: usize,
+) -> ExoWindow {
+    let skeleton = &aligned.skeleton;
+    let scale = skeleton.head_height() / SmplSkeleton::mean_shape().head_height();
+    let mut exo = ExoWindow {
+        slots,
+        slot_observer: (0..slots).map(|s| observers.get(s).copied()).collect(),
+        rays: vec![0.0; WINDOW * slots * EXO_KEYPOINT_COUNT * 3],
+        ray_valid: vec![0.0; WINDOW * slots * EXO_KEYPOINT_COUNT],
+        gate_features: vec![0.0; WINDOW * slots * EXO_KEYPOINT_COUNT * GATE_FEATURE_DIM],
+        observer_mask: vec![0.0; WINDOW * slots],
+    };
+    let coarse_fk: Vec<_> = coarse.iter().map(|p| skeleton.forward_kinematics(p)).collect();
+    for (slot, observer_index) in exo.slot_observer.clone().into_iter().enumerate() {
+        let Some(observer) = observer_index.and_then(|o| aligned.observers.get(o)) else { continue };
+        for t in 0..window.plan.len() {
+            let frame = window.plan.frames.start + t;
+            if !observer.head.valid.get(frame).copied().unwrap_or(false) {
+                continue;
+            }
+            let observer_pose = &observer.head.poses[frame];
+            let fk = &coarse_fk[t];
+            let region =
+                propose_region(&fk.positions[..NUM_JOINTS], &observer.camera, observer_pose, DEFAULT_REGION_MARGIN);
+            let predicted_points = exo_keypoints_from_smpl(&fk.positions, fk.rotations[SmplJoint::Head.index()], scale);
+            let predicted = predicted_points.map(|p| project(&observer.camera, observer_pose, p));
+            let detected = &observer.keypoints[frame];
+            let rays = canonicalize_keypoints(detected, &observer.camera, observer_pose, &window.head[t]);
+            let valid = rays.map(|r| r.valid);
+            let features = gate_features(detected, &valid, &predicted, &observer.camera, &region);
+            for k in 0..EXO_KEYPOINT_COUNT {
+                let i = exo.index(t, slot, k);
+                exo.rays[3 * i..3 * i + 3].copy_from_slice(&rays[k].endpoint.to_array());
+                exo.ray_valid[i] = f32::from(u8::from(valid[k]));
+                exo.gate_features[GATE_FEATURE_DIM * i..GATE_FEATURE_DIM * (i + 1)].copy_from_slice(&features[k]);
+            }
+            exo.observer_mask[t * slots + slot] = f32::from(u8::from(valid.iter().any(|&v| v)));
+        }
+    }
+    exo
+}
+
+fn project(camera: &CameraCalibration, t_world_device: &RigidTransform, p: Vec3) -> Option<egoexo_core::glam::Vec2> {
+    camera.project_world(p, t_world_device)
+}
+
+/// `[T, N, K, 4]` fusion input: each ray scaled by its gate value, then the gate value.
+pub fn gated_exo(exo: &ExoWindow, gate: &[f32]) -> Vec<f32> {
+    let mut out = vec![0.0; WINDOW * exo.slots * EXO_KEYPOINT_COUNT * 4];
+    for i in 0..WINDOW * exo.slots * EXO_KEYPOINT_COUNT {
+        let g = gate[i] * exo.ray_valid[i];
+        for c in 0..3 {
+            out[4 * i + c] = g * exo.rays[3 * i + c];
+        }
+        out[4 * i + 3] = g;
+    }
+    out
+}
+
+/// Ego features dimension re-exported for shape checks.
+pub const EGO_DIM: usize = EGO_FEATURE_DIM;
+
+/// The ground-truth pose of one window as the networks' targets: `WINDOW × POSE_DIM`, root
+/// orientation in the window frame. Padded frames repeat the last real frame. `None` if the
+/// ground truth is missing or invalid at a real frame of the window.
+pub fn window_targets(aligned: &AlignedSession, window: &EgoWindow) -> Option<Vec<f32>> {
+    let gt = aligned.ground_truth.as_ref()?;
+    let frames = window.plan.frames.clone();
+    if !frames.clone().all(|f| gt.valid.get(f).copied().unwrap_or(false)) {
+        return None;
+    }
+    let r_window_world = window.t_world_window.rotation.conjugate();
+    let mut out = vec![0.0; WINDOW * POSE_DIM];
+    for t in 0..WINDOW {
+        let pose = &gt.poses[frames.start + t.min(frames.len() - 1)];
+        encode_pose(r_window_world * pose.root_orientation, &pose.body, &mut out[t * POSE_DIM..(t + 1) * POSE_DIM]);
+    }
+    Some(out)
+}

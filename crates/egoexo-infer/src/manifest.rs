@@ -1,0 +1,127 @@
+//! `models/manifest.json`: which ONNX files make up each tracking mode's networks, their
+//! checksums and tensor shapes, and the feature layouts they were trained with.
+//!
+//! Loading refuses models trained on a different feature layout than this build computes,
+//! so a stale model can never silently receive the wrong inputs.
+
+use egoexo_core::ego_features::{EGO_FEATURE_LAYOUT_VERSION, EgoFeatureLayout, TrackingMode};
+use egoexo_core::gate_features::{GATE_FEATURE_LAYOUT_VERSION, GateFeatureLayout};
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use crate::InferError;
+use crate::windows::WINDOW;
+
+/// Version of the manifest format.
+pub const MANIFEST_FORMAT_VERSION: u32 = 1;
+
+/// A tensor's name and shape.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TensorSpec {
+    pub name: String,
+    pub shape: Vec<usize>,
+}
+
+/// One ONNX file.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ModelFile {
+    /// Path relative to the models folder.
+    pub file: String,
+    /// Lowercase hex sha256 of the file.
+    pub sha256: String,
+    /// File size in bytes.
+    pub bytes: u64,
+    pub inputs: Vec<TensorSpec>,
+    pub outputs: Vec<TensorSpec>,
+}
+
+/// The networks of one tracking mode.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelSetManifest {
+    pub tracking: TrackingMode,
+    pub ego_feature_layout: EgoFeatureLayout,
+    pub gate_feature_layout: GateFeatureLayout,
+    /// Observer slots of the fusion network.
+    pub max_observers: usize,
+    /// Transformer width.
+    pub hidden_dim: usize,
+    pub egonet: ModelFile,
+    pub gate: ModelFile,
+    pub fusion: ModelFile,
+}
+
+/// The whole manifest.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    pub format_version: u32,
+    /// Window length T (frames).
+    pub window: usize,
+    /// Frame rate the models were trained at.
+    pub fps: f32,
+    pub model_sets: Vec<ModelSetManifest>,
+    /// Free-form provenance: training data, subjects, command, commit, date, timings.
+    #[serde(default)]
+    pub training: serde_json::Value,
+}
+
+impl Manifest {
+    /// Parses and checks a manifest.
+    pub fn from_json(bytes: &[u8]) -> Result<Self, InferError> {
+        let manifest: Manifest =
+            serde_json::from_slice(bytes).map_err(|e| InferError::Manifest(format!("manifest.json: {e}")))?;
+        manifest.check()?;
+        Ok(manifest)
+    }
+
+    fn check(&self) -> Result<(), InferError> {
+        if self.format_version != MANIFEST_FORMAT_VERSION {
+            return Err(InferError::Manifest(format!(
+                "manifest.json: format_version {} is not supported (expected {MANIFEST_FORMAT_VERSION})",
+                self.format_version
+            )));
+        }
+        if self.window != WINDOW {
+            return Err(InferError::Manifest(format!(
+                "manifest.json: window {} (this build uses {WINDOW})",
+                self.window
+            )));
+        }
+        for set in &self.model_sets {
+            let mode = set.tracking.points();
+            if set.ego_feature_layout.version != EGO_FEATURE_LAYOUT_VERSION {
+                return Err(InferError::Manifest(format!(
+                    "manifest.json: {mode}-point models expect ego feature layout v{}, this build computes v{EGO_FEATURE_LAYOUT_VERSION}",
+                    set.ego_feature_layout.version
+                )));
+            }
+            if set.gate_feature_layout.version != GATE_FEATURE_LAYOUT_VERSION {
+                return Err(InferError::Manifest(format!(
+                    "manifest.json: {mode}-point gate expects gate feature layout v{}, this build computes v{GATE_FEATURE_LAYOUT_VERSION}",
+                    set.gate_feature_layout.version
+                )));
+            }
+            if set.ego_feature_layout.tracking != set.tracking {
+                return Err(InferError::Manifest(format!(
+                    "manifest.json: {mode}-point set has a mismatched ego layout"
+                )));
+            }
+            if set.max_observers == 0 || set.max_observers > 16 {
+                return Err(InferError::Manifest(format!(
+                    "manifest.json: max_observers {} out of 1..=16",
+                    set.max_observers
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// The model set for a tracking mode, if shipped.
+    pub fn model_set(&self, tracking: TrackingMode) -> Option<&ModelSetManifest> {
+        self.model_sets.iter().find(|s| s.tracking == tracking)
+    }
+}
+
+/// Lowercase hex sha256.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect()
+}

@@ -1,0 +1,104 @@
+//! ONNX models run by tract: loaded from bytes (the browser fetches them; nothing is
+//! compiled into the binary), checked against the manifest, optimised once for their fixed
+//! input shapes, and reused for every window.
+
+use std::io::Cursor;
+use std::sync::Arc;
+
+use tract_onnx::prelude::*;
+
+use crate::InferError;
+use crate::manifest::{ModelFile, ModelSetManifest, sha256_hex};
+
+/// One optimised ONNX graph with fixed input shapes.
+#[derive(Clone)]
+pub struct OnnxModel {
+    name: String,
+    plan: Arc<TypedRunnableModel>,
+    input_shapes: Vec<Vec<usize>>,
+}
+
+impl std::fmt::Debug for OnnxModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("OnnxModel").field("name", &self.name).field("input_shapes", &self.input_shapes).finish()
+    }
+}
+
+impl OnnxModel {
+    /// Parses, types with `input_shapes` (all `f32`), optimises and plans a model.
+    pub fn load(name: &str, bytes: &[u8], input_shapes: &[Vec<usize>]) -> Result<Self, InferError> {
+        let err = |e: TractError| InferError::Model { model: name.to_string(), message: format!("{e:#}") };
+        let mut model = tract_onnx::onnx().model_for_read(&mut Cursor::new(bytes)).map_err(err)?;
+        for (i, shape) in input_shapes.iter().enumerate() {
+            model = model.with_input_fact(i, f32::fact(shape).into()).map_err(err)?;
+        }
+        let plan = model.into_optimized().map_err(err)?.into_runnable().map_err(err)?;
+        Ok(Self { name: name.to_string(), plan, input_shapes: input_shapes.to_vec() })
+    }
+
+    /// The model's name (for errors).
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Runs on row-major `f32` inputs in declaration order; returns every output flattened.
+    pub fn run(&self, inputs: &[&[f32]]) -> Result<Vec<Vec<f32>>, InferError> {
+        if inputs.len() != self.input_shapes.len() {
+            return Err(InferError::Model {
+                model: self.name.clone(),
+                message: format!("expected {} inputs, got {}", self.input_shapes.len(), inputs.len()),
+            });
+        }
+        let err = |e: TractError| InferError::Model { model: self.name.clone(), message: format!("{e:#}") };
+        let mut values = TVec::new();
+        for (data, shape) in inputs.iter().zip(&self.input_shapes) {
+            if data.len() != shape.iter().product::<usize>() {
+                return Err(InferError::Model {
+                    model: self.name.clone(),
+                    message: format!("input of {} numbers does not fit shape {shape:?}", data.len()),
+                });
+            }
+            values.push(Tensor::from_shape(shape, data).map_err(err)?.into());
+        }
+        let outputs = self.plan.run(values).map_err(err)?;
+        outputs.iter().map(|t| Ok(t.to_plain_array_view::<f32>().map_err(err)?.iter().copied().collect())).collect()
+    }
+}
+
+/// The three networks of one tracking mode.
+#[derive(Clone, Debug)]
+pub struct ModelSet {
+    pub manifest: ModelSetManifest,
+    pub egonet: OnnxModel,
+    pub gate: OnnxModel,
+    pub fusion: OnnxModel,
+}
+
+impl ModelSet {
+    /// Loads a model set, reading each file through `read` (a path relative to the models
+    /// folder → bytes) and checking its sha256 against the manifest.
+    pub fn load(
+        manifest: &ModelSetManifest,
+        mut read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
+    ) -> Result<Self, InferError> {
+        let mut load = |file: &ModelFile| -> Result<OnnxModel, InferError> {
+            let bytes = read(&file.file)?;
+            let digest = sha256_hex(&bytes);
+            if digest != file.sha256 {
+                return Err(InferError::Checksum {
+                    file: file.file.clone(),
+                    expected: file.sha256.clone(),
+                    actual: digest,
+                });
+            }
+            let shapes: Vec<Vec<usize>> = file.inputs.iter().map(|i| i.shape.clone()).collect();
+            OnnxModel::load(&file.file, &bytes, &shapes)
+        };
+        Ok(Self {
+            egonet: load(&manifest.egonet)?,
+            gate: load(&manifest.gate)?,
+            fusion: load(&manifest.fusion)?,
+            manifest: manifest.clone(),
+        })
+    }
+}

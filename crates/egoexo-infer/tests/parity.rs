@@ -1,0 +1,82 @@
+//! tract runs the exported networks like PyTorch and onnxruntime did: the fixture stores
+//! seeded inputs with both frameworks' outputs (written by `egoexo_train.export`).
+
+mod common;
+
+use common::*;
+use egoexo_core::TrackingMode;
+
+struct Reference {
+    index: serde_json::Value,
+    data: Vec<f32>,
+}
+
+impl Reference {
+    fn load() -> Self {
+        let dir = fixture_dir();
+        let index: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.join("reference.json")).unwrap()).unwrap();
+        let bytes = std::fs::read(dir.join("reference.bin")).unwrap();
+        let data = bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+        Self { index, data }
+    }
+
+    fn array(&self, key: &str) -> &[f32] {
+        let entry = &self.index["arrays"][key];
+        let offset = entry["offset"].as_u64().unwrap_or_else(|| panic!("no array {key}")) as usize;
+        let len: usize = entry["shape"].as_array().unwrap().iter().map(|d| d.as_u64().unwrap() as usize).product();
+        &self.data[offset..offset + len]
+    }
+}
+
+fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+}
+
+#[test]
+fn tract_matches_pytorch_and_onnxruntime_within_1e_4() {
+    let reference = Reference::load();
+    assert_eq!(reference.index["tracking"], "three_point");
+    let models = fixture_models(TrackingMode::ThreePoint);
+    for (name, model, inputs, outputs) in [
+        ("egonet", &models.egonet, vec!["ego"], vec!["root_6d", "body_6d"]),
+        ("gate", &models.gate, vec!["gate_features"], vec!["gate"]),
+        ("fusion", &models.fusion, vec!["ego", "egonet", "exo", "observer_mask"], vec!["root_6d", "body_6d"]),
+    ] {
+        let args: Vec<&[f32]> = inputs.iter().map(|i| reference.array(&format!("{name}/input/{i}"))).collect();
+        let got = model.run(&args).unwrap();
+        assert_eq!(got.len(), outputs.len());
+        for (out, value) in outputs.iter().zip(&got) {
+            for framework in ["torch", "onnxruntime"] {
+                let expected = reference.array(&format!("{name}/{framework}/{out}"));
+                let diff = max_abs_diff(value, expected);
+                assert!(diff <= 1e-4, "{name}.{out}: tract vs {framework} max abs diff {diff}");
+            }
+        }
+    }
+}
+
+#[test]
+fn a_tampered_model_file_is_refused() {
+    let manifest = fixture_manifest();
+    let set = manifest.model_set(TrackingMode::OnePoint).unwrap();
+    let dir = fixture_dir();
+    let err = egoexo_infer::models::ModelSet::load(set, |file| {
+        let mut bytes = std::fs::read(dir.join(file)).unwrap();
+        if file.ends_with("gate.onnx") {
+            bytes[100] ^= 1;
+        }
+        Ok(bytes)
+    })
+    .unwrap_err();
+    assert!(err.to_string().contains("gate.onnx") && err.to_string().contains("sha256"), "{err}");
+}
+
+#[test]
+fn a_manifest_from_another_feature_layout_is_refused() {
+    let text = std::fs::read_to_string(fixture_dir().join("manifest.json")).unwrap();
+    let stale = text.replacen("\"version\": 1", "\"version\": 99", 1);
+    let err = egoexo_infer::manifest::Manifest::from_json(stale.as_bytes()).unwrap_err();
+    assert!(err.to_string().contains("layout v99"), "{err}");
+}

@@ -1,0 +1,147 @@
+//! What the viewer draws, as plain data: built by the worker (`egoexo_infer::scene`) from a
+//! reconstruction, sent to the page (serde / structured clone), rendered by `egoexo-viewer`.
+//! Nothing here computes geometry; every position is already in the world.
+//!
+//! Conventions: world Y-up, metres; arrays are flat and row-major (`frames × …`) so they cross
+//! the worker boundary as typed arrays; quaternions are `[x, y, z, w]`.
+
+use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
+use egoexo_core::skeleton::{NUM_JOINTS, PARENTS};
+use serde::{Deserialize, Serialize};
+
+/// Version of this layout (the page refuses other versions).
+pub const SCENE_FORMAT_VERSION: u32 = 1;
+
+/// Everything the viewer shows for one reconstructed session.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SceneData {
+    pub format_version: u32,
+    /// Session name.
+    pub name: String,
+    pub fps: f32,
+    pub frames: usize,
+    /// Session-clock time of frame 0, seconds.
+    pub start_s: f64,
+    /// SMPL parents (`-1` for the root).
+    pub parents: Vec<i8>,
+    /// The reconstruction: `frames × 24 × 3` joint positions.
+    pub joints: Vec<f32>,
+    /// Frames actually reconstructed (tracking valid).
+    pub valid: Vec<bool>,
+    /// Frames with exo evidence (an observer ray with gate ≥ 0.5).
+    pub exo_evidence: Vec<bool>,
+    /// The ego-only reconstruction for the comparison overlay, `frames × 24 × 3`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ego_only_joints: Option<Vec<f32>>,
+    /// Ground truth as a ghost, `frames × 24 × 3`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ground_truth_joints: Option<Vec<f32>>,
+    /// Wearer devices: head and (3-point) wrists, `frames × 3` positions each.
+    pub devices: Vec<DeviceTrack>,
+    pub observers: Vec<ObserverScene>,
+    /// Estimated floor height (lowest reconstructed foot joint), metres.
+    pub floor_y: f32,
+    /// Method that produced `joints` (`ego-exo`, …).
+    pub method: String,
+}
+
+/// A device trajectory.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DeviceTrack {
+    /// `head`, `left_wrist`, `right_wrist`.
+    pub name: String,
+    /// `frames × 3`.
+    pub positions: Vec<f32>,
+    pub valid: Vec<bool>,
+}
+
+/// An observer's camera and gated rays.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObserverScene {
+    pub id: String,
+    /// `T_world_camera` per frame: `frames × 7` (`[qx, qy, qz, qw, tx, ty, tz]`), optical frame
+    /// +X right, +Y down, +Z forward.
+    pub camera_poses: Vec<f32>,
+    pub valid: Vec<bool>,
+    /// Half field of view (radians) horizontally and vertically, for drawing the frustum.
+    pub half_fov: [f32; 2],
+    /// Image size in pixels.
+    pub image_size: [u32; 2],
+    /// Per frame and exo keypoint: ray endpoint in the world (`x, y, z`) and gate value, i.e.
+    /// `frames × 13 × 4`; gate 0 and a zero endpoint where there is no valid ray.
+    pub rays: Vec<f32>,
+}
+
+impl SceneData {
+    /// An empty scene for `frames` frames (no observers, no devices).
+    pub fn new(name: &str, fps: f32, frames: usize, method: &str) -> Self {
+        Self {
+            format_version: SCENE_FORMAT_VERSION,
+            name: name.to_string(),
+            fps,
+            frames,
+            start_s: 0.0,
+            parents: PARENTS.to_vec(),
+            joints: vec![0.0; frames * NUM_JOINTS * 3],
+            valid: vec![false; frames],
+            exo_evidence: vec![false; frames],
+            ego_only_joints: None,
+            ground_truth_joints: None,
+            devices: Vec::new(),
+            observers: Vec::new(),
+            floor_y: 0.0,
+            method: method.to_string(),
+        }
+    }
+
+    /// Checks that every array has the length its frame count implies.
+    pub fn check(&self) -> Result<(), String> {
+        let f = self.frames;
+        let joints = f * NUM_JOINTS * 3;
+        let mut problems = Vec::new();
+        let mut expect = |what: &str, got: usize, want: usize| {
+            if got != want {
+                problems.push(format!("{what} has {got} values, expected {want}"));
+            }
+        };
+        expect("joints", self.joints.len(), joints);
+        expect("valid", self.valid.len(), f);
+        expect("exo_evidence", self.exo_evidence.len(), f);
+        expect("parents", self.parents.len(), NUM_JOINTS);
+        if let Some(j) = &self.ego_only_joints {
+            expect("ego_only_joints", j.len(), joints);
+        }
+        if let Some(j) = &self.ground_truth_joints {
+            expect("ground_truth_joints", j.len(), joints);
+        }
+        for d in &self.devices {
+            expect(&format!("device {} positions", d.name), d.positions.len(), 3 * f);
+            expect(&format!("device {} valid", d.name), d.valid.len(), f);
+        }
+        for o in &self.observers {
+            expect(&format!("observer {} camera_poses", o.id), o.camera_poses.len(), 7 * f);
+            expect(&format!("observer {} valid", o.id), o.valid.len(), f);
+            expect(&format!("observer {} rays", o.id), o.rays.len(), 4 * EXO_KEYPOINT_COUNT * f);
+        }
+        if self.format_version != SCENE_FORMAT_VERSION {
+            problems.push(format!("format_version {} (expected {SCENE_FORMAT_VERSION})", self.format_version));
+        }
+        if problems.is_empty() { Ok(()) } else { Err(problems.join("; ")) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_new_scene_is_consistent_and_survives_json() {
+        let scene = SceneData::new("s", 30.0, 4, "ego-exo");
+        scene.check().unwrap();
+        let back: SceneData = serde_json::from_str(&serde_json::to_string(&scene).unwrap()).unwrap();
+        assert_eq!(back, scene);
+        let mut broken = scene;
+        broken.joints.pop();
+        assert!(broken.check().unwrap_err().contains("joints has 287 values"));
+    }
+}

@@ -1,0 +1,155 @@
+"""The networks of EgoExoMoCap (paper § Method), sized for CPU training.
+
+Tensor layouts (row-major, batch first, T = 96 frames, N observer slots, K = 13 keypoints):
+
+- EgoNet: ``ego [B,T,60]`` -> ``root_6d [B,T,6]``, ``body_6d [B,T,126]`` (window frame).
+- Gate: ``gate_features [B,T,N,K,F]`` -> ``gate [B,T,N,K]`` in [0, 1].
+- Fusion: ``ego [B,T,60]``, ``egonet [B,T,132]``, ``exo [B,T,N,K,4]`` (gated ray xyz and the
+  gate), ``observer_mask [B,T,N]`` (1 = present) -> ``root_6d [B,T,6]``, ``body_6d [B,T,126]``.
+
+6D rotations are the first two *columns* of the rotation matrix, as in the Rust core.
+Attention is written out with plain matmuls so the ONNX export is a small, portable op set
+(MatMul, Softmax, LayerNormalization, Erf) that tract runs.
+"""
+
+import math
+
+import torch
+from torch import nn
+
+EGO_DIM = 60
+POSE_DIM = 132
+ROOT_DIM = 6
+BODY_DIM = 126
+K = 13
+EXO_TOKEN_DIM = 4
+MASKED = -1.0e4
+
+
+def sinusoidal_encoding(length: int, dim: int) -> torch.Tensor:
+    """The Transformer's fixed sinusoidal positional encoding, ``[length, dim]``."""
+    position = torch.arange(length, dtype=torch.float32).unsqueeze(1)
+    div = torch.exp(torch.arange(0, dim, 2, dtype=torch.float32) * (-math.log(10000.0) / dim))
+    pe = torch.zeros(length, dim)
+    pe[:, 0::2] = torch.sin(position * div)
+    pe[:, 1::2] = torch.cos(position * div[: dim // 2])
+    return pe
+
+
+def mlp(inp: int, hidden: int, out: int) -> nn.Sequential:
+    return nn.Sequential(nn.Linear(inp, hidden), nn.GELU(), nn.Linear(hidden, out))
+
+
+class MixerBlock(nn.Module):
+    """One MLP-Mixer block: token mixing across time, then channel mixing (pre-norm)."""
+
+    def __init__(self, frames: int, dim: int, token_hidden: int, channel_hidden: int):
+        super().__init__()
+        self.norm1 = nn.LayerNorm(dim)
+        self.token = mlp(frames, token_hidden, frames)
+        self.norm2 = nn.LayerNorm(dim)
+        self.channel = mlp(dim, channel_hidden, dim)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        x = x + self.token(self.norm1(x).transpose(1, 2)).transpose(1, 2)
+        return x + self.channel(self.norm2(x))
+
+
+class EgoNet(nn.Module):
+    """Ego-only coarse pose (paper § Ego-Guided Wearer Localization)."""
+
+    def __init__(self, frames: int = 96, hidden: int = 256):
+        super().__init__()
+        self.embed = nn.Linear(EGO_DIM, hidden)
+        self.register_buffer("positions", sinusoidal_encoding(frames, hidden), persistent=False)
+        self.mixer = MixerBlock(frames, hidden, hidden, 2 * hidden)
+        self.root_head = mlp(hidden, hidden, ROOT_DIM)
+        self.body_head = mlp(hidden, hidden, BODY_DIM)
+
+    def forward(self, ego: torch.Tensor):
+        x = self.mixer(self.embed(ego) + self.positions)
+        return self.root_head(x), self.body_head(x)
+
+
+class Gate(nn.Module):
+    """Per-joint confidences from the core's gate features (the paper's ScoreNet reads a DINO
+    CLS token instead; none can ship here). Two layers, sigmoid, over all K joints of one
+    observer-frame so the gate can use the whole body's agreement pattern."""
+
+    def __init__(self, features: int = 5, hidden: int = 128):
+        super().__init__()
+        self.net = mlp(K * features, hidden, K)
+
+    def forward(self, gate_features: torch.Tensor) -> torch.Tensor:
+        b, t, n, k, f = gate_features.shape
+        logits = self.net(gate_features.reshape(b, t, n, k * f))
+        return torch.sigmoid(logits)
+
+
+class Attention(nn.Module):
+    def __init__(self, dim: int, heads: int):
+        super().__init__()
+        self.heads = heads
+        self.qkv = nn.Linear(dim, 3 * dim)
+        self.out = nn.Linear(dim, dim)
+
+    def forward(self, x: torch.Tensor, key_bias: torch.Tensor | None) -> torch.Tensor:
+        b, s, d = x.shape
+        h = self.heads
+        q, k, v = self.qkv(x).reshape(b, s, 3, h, d // h).permute(2, 0, 3, 1, 4)
+        scores = torch.matmul(q, k.transpose(-1, -2)) * (1.0 / math.sqrt(d // h))
+        if key_bias is not None:
+            scores = scores + key_bias[:, None, None, :]
+        attn = torch.softmax(scores, dim=-1)
+        return self.out(torch.matmul(attn, v).permute(0, 2, 1, 3).reshape(b, s, d))
+
+
+class EncoderLayer(nn.Module):
+    """Pre-norm Transformer encoder layer."""
+
+    def __init__(self, dim: int, heads: int, ff: int, dropout: float):
+        super().__init__()
+        self.norm1 = nn.LayerNorm(dim)
+        self.attn = Attention(dim, heads)
+        self.norm2 = nn.LayerNorm(dim)
+        self.ff = mlp(dim, ff, dim)
+        self.drop = nn.Dropout(dropout)
+
+    def forward(self, x: torch.Tensor, key_bias: torch.Tensor | None = None) -> torch.Tensor:
+        x = x + self.drop(self.attn(self.norm1(x), key_bias))
+        return x + self.drop(self.ff(self.norm2(x)))
+
+
+class Fusion(nn.Module):
+    """Ego/exo tokens -> spatial transformer over [ego, exo_1..exo_N] (ego output kept) ->
+    temporal transformer with learned positions -> root and body 6D. Predicts a residual on
+    EgoNet's coarse pose, so with every observer masked it refines the ego-only estimate."""
+
+    def __init__(self, frames: int = 96, hidden: int = 128, heads: int = 4, spatial_layers: int = 2,
+                 temporal_layers: int = 3, dropout: float = 0.1):
+        super().__init__()
+        self.ego_token = nn.Linear(EGO_DIM + POSE_DIM, hidden)
+        self.exo_token = nn.Linear(K * EXO_TOKEN_DIM, hidden)
+        self.token_type = nn.Parameter(torch.zeros(2, hidden))
+        self.spatial = nn.ModuleList([EncoderLayer(hidden, heads, 2 * hidden, dropout) for _ in range(spatial_layers)])
+        self.temporal_positions = nn.Parameter(torch.zeros(frames, hidden))
+        nn.init.normal_(self.temporal_positions, std=0.02)
+        self.temporal = nn.ModuleList([EncoderLayer(hidden, heads, 2 * hidden, dropout) for _ in range(temporal_layers)])
+        self.norm = nn.LayerNorm(hidden)
+        self.root_head = mlp(hidden, hidden, ROOT_DIM)
+        self.body_head = mlp(hidden, hidden, BODY_DIM)
+
+    def forward(self, ego, egonet, exo, observer_mask):
+        b, t, n = observer_mask.shape
+        ego_tok = self.ego_token(torch.cat([ego, egonet], dim=-1)) + self.token_type[0]
+        exo_tok = self.exo_token(exo.reshape(b, t, n, K * EXO_TOKEN_DIM)) + self.token_type[1]
+        tokens = torch.cat([ego_tok.unsqueeze(2), exo_tok], dim=2).reshape(b * t, n + 1, -1)
+        present = torch.cat([torch.ones_like(observer_mask[..., :1]), observer_mask], dim=-1).reshape(b * t, n + 1)
+        key_bias = (1.0 - present) * MASKED
+        for layer in self.spatial:
+            tokens = layer(tokens, key_bias)
+        x = tokens[:, 0].reshape(b, t, -1) + self.temporal_positions
+        for layer in self.temporal:
+            x = layer(x)
+        x = self.norm(x)
+        return egonet[..., :ROOT_DIM] + self.root_head(x), egonet[..., ROOT_DIM:] + self.body_head(x)

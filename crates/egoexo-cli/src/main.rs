@@ -29,6 +29,8 @@ enum Command {
     Synth(commands::synth::Args),
     /// Score reconstruction methods on simulated sessions with the paper's metrics.
     Eval(commands::eval::Args),
+    /// Reconstruct the wearer's motion and write it as AMASS npz, BVH, glb, CSV or JSON.
+    Reconstruct(commands::reconstruct::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -39,6 +41,7 @@ fn main() -> std::process::ExitCode {
         Command::Mocap(args) => commands::mocap::run(args),
         Command::Synth(args) => commands::synth::run(args),
         Command::Eval(args) => commands::eval::run(args),
+        Command::Reconstruct(args) => commands::reconstruct::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

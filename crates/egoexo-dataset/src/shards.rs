@@ -19,8 +19,8 @@ use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
 use egoexo_core::gate_features::{GATE_FEATURE_DIM, GATE_FEATURE_LAYOUT_VERSION};
 use egoexo_core::skeleton::NUM_JOINTS;
 use egoexo_infer::inputs::{POSE_DIM, ego_window, exo_window, window_targets, world_poses};
-use egoexo_infer::models::ModelSet;
-use egoexo_infer::pipeline::{coarse_pose, observer_order};
+use egoexo_infer::models::OnnxModel;
+use egoexo_infer::pipeline::{coarse_pose_with, observer_order};
 use egoexo_infer::windows::{WINDOW, plan_windows, valid_spans};
 use egoexo_mocap::MotionLibrary;
 use egoexo_session::align::{AlignOptions, AlignedSession, align};
@@ -155,6 +155,14 @@ impl Buffer {
 /// Receives each file the shard writer produces (name, bytes).
 pub type ShardStore<'a> = dyn FnMut(&str, Vec<u8>) -> Result<(), DatasetError> + 'a;
 
+/// A trained EgoNet for the fusion stage: the model and its file's sha256 (recorded in the
+/// index so training can check which EgoNet made its inputs).
+#[derive(Clone, Copy, Debug)]
+pub struct EgoNetForShards<'a> {
+    pub model: &'a OnnxModel,
+    pub sha256: &'a str,
+}
+
 /// Writes shards for `clips` of `library`. `egonet` is required for the fusion stage.
 /// `store(name, bytes)` receives each shard file and finally `index.json`; `progress(done,
 /// total)` counts clips.
@@ -163,29 +171,13 @@ pub fn write_shards(
     clips: &[usize],
     stage: ShardStage,
     options: &ShardOptions,
-    egonet: Option<&ModelSet>,
+    egonet: Option<EgoNetForShards<'_>>,
     store: &mut ShardStore<'_>,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<ShardIndex, DatasetError> {
     let models = match stage {
         ShardStage::Ego => None,
-        ShardStage::Fusion => {
-            let m = egonet.ok_or(DatasetError::NeedEgoNet)?;
-            if m.manifest.tracking != options.tracking {
-                return Err(DatasetError::Options(format!(
-                    "the EgoNet is for {}-point tracking but shards are for {}-point",
-                    m.manifest.tracking.points(),
-                    options.tracking.points()
-                )));
-            }
-            if m.manifest.max_observers != options.max_observers {
-                return Err(DatasetError::Options(format!(
-                    "the models have {} observer slots but shards ask for {}",
-                    m.manifest.max_observers, options.max_observers
-                )));
-            }
-            Some(m)
-        }
+        ShardStage::Fusion => Some(egonet.ok_or(DatasetError::NeedEgoNet)?),
     };
     if options.max_observers == 0
         || options.observers.0 > options.observers.1
@@ -210,7 +202,7 @@ pub fn write_shards(
         options: options.clone(),
         subjects: Vec::new(),
         clips: Vec::new(),
-        egonet_sha256: models.map(|m| m.manifest.egonet.sha256.clone()),
+        egonet_sha256: models.map(|m| m.sha256.to_string()),
         shards: Vec::new(),
         windows: 0,
         frames_simulated: 0,
@@ -267,7 +259,7 @@ fn add_windows(
     subject: u32,
     clip: usize,
     options: &ShardOptions,
-    models: Option<&ModelSet>,
+    models: Option<EgoNetForShards<'_>>,
     slots: usize,
     buffer: &mut Buffer,
 ) -> Result<(), DatasetError> {
@@ -286,7 +278,7 @@ fn add_windows(
         buffer.clip.push(clip as i32);
         buffer.start.push(plan.frames.start as i32);
         if let Some(models) = models {
-            let coarse = coarse_pose(models, &window).map_err(|e| DatasetError::Simulate(e.to_string()))?;
+            let coarse = coarse_pose_with(models.model, &window).map_err(|e| DatasetError::Simulate(e.to_string()))?;
             let coarse_world = world_poses(&window, &coarse, &aligned.skeleton, aligned.head_joint_in_device);
             let exo = exo_window(aligned, &window, &coarse_world, &observers, slots);
             buffer.egonet.extend_from_slice(&coarse);

@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 use crate::InferError;
 use crate::baselines::{NearestNeighbourIndex, rest_pose_window};
 use crate::inputs::{EgoWindow, POSE_DIM, ego_window, exo_window, gated_exo, world_poses};
-use crate::models::ModelSet;
+use crate::models::{ModelSet, OnnxModel};
 use crate::windows::{WINDOW, crossfade_weight, plan_windows, valid_spans};
 
 /// How to reconstruct.
@@ -357,8 +357,13 @@ pub fn observer_order(aligned: &AlignedSession) -> Vec<usize> {
 /// EgoNet's coarse pose for one window: `WINDOW × POSE_DIM`, root orientation in the window
 /// frame.
 pub fn coarse_pose(models: &ModelSet, window: &EgoWindow) -> Result<Vec<f32>, InferError> {
-    let out = models.egonet.run(&[&window.ego])?;
-    concat_pose(models.egonet.name(), &out)
+    coarse_pose_with(&models.egonet, window)
+}
+
+/// [`coarse_pose`] with a given EgoNet model (e.g. one not yet in a model set).
+pub fn coarse_pose_with(egonet: &OnnxModel, window: &EgoWindow) -> Result<Vec<f32>, InferError> {
+    let out = egonet.run(&[&window.ego])?;
+    concat_pose(egonet.name(), &out)
 }
 
 /// `[root 6D (T×6), body 6D (T×126)]` outputs → `T × POSE_DIM`.

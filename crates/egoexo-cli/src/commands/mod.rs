@@ -5,6 +5,7 @@ pub mod eval;
 pub mod inspect;
 pub mod mocap;
 pub mod models;
+pub mod reconstruct;
 pub mod session_input;
 pub mod synth;
 pub mod tracking;

@@ -4,12 +4,15 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use egoexo_core::TrackingMode;
-use egoexo_dataset::shards::{ShardOptions, ShardStage, write_shards};
+use egoexo_core::ego_features::EGO_FEATURE_DIM;
+use egoexo_dataset::shards::{EgoNetForShards, ShardOptions, ShardStage, write_shards};
+use egoexo_infer::manifest::sha256_hex;
+use egoexo_infer::models::OnnxModel;
+use egoexo_infer::windows::WINDOW;
 use egoexo_session::format::save_egoexo;
 use egoexo_synth::{SynthConfig, simulate};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::models::{load_model_set, models_dir, read_manifest};
 use super::tracking::TrackingArg;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -42,9 +45,9 @@ pub struct Args {
     /// Write training shards of this stage instead of sessions.
     #[arg(long, value_enum)]
     pub shards: Option<StageArg>,
-    /// Models folder whose EgoNet makes the fusion shards' coarse poses.
+    /// The trained EgoNet (`egonet.onnx`) that makes the fusion shards' coarse poses.
     #[arg(long)]
-    pub models: Option<PathBuf>,
+    pub egonet: Option<PathBuf>,
     /// Shards: simulations of every clip.
     #[arg(long, default_value_t = 3)]
     pub simulations: usize,
@@ -81,12 +84,11 @@ pub fn run(args: Args) -> Result<()> {
         let egonet = match stage {
             ShardStage::Ego => None,
             ShardStage::Fusion => {
-                let dir = models_dir(args.models.as_deref());
-                let manifest = read_manifest(&dir)?;
-                Some(
-                    load_model_set(&dir, &manifest, tracking)?
-                        .with_context(|| format!("{} has no {}-point models", dir.display(), tracking.points()))?,
-                )
+                let path =
+                    args.egonet.as_ref().context("--shards fusion needs --egonet FILE (a trained egonet.onnx)")?;
+                let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+                let model = OnnxModel::load(&path.display().to_string(), &bytes, &[vec![1, WINDOW, EGO_FEATURE_DIM]])?;
+                Some((model, sha256_hex(&bytes)))
             }
         };
         let options = ShardOptions {
@@ -106,7 +108,7 @@ pub fn run(args: Args) -> Result<()> {
             &clips,
             stage,
             &options,
-            egonet.as_ref(),
+            egonet.as_ref().map(|(model, sha256)| EgoNetForShards { model, sha256 }),
             &mut |name, bytes| {
                 std::fs::write(out.join(name), bytes)
                     .map_err(|e| egoexo_dataset::DatasetError::Write(format!("{name}: {e}")))

@@ -169,7 +169,8 @@ pub fn align(session: &Session, options: &AlignOptions) -> Result<AlignedSession
     let (first, last) = session.wearer.head.time_range_ns().ok_or(AlignError::EmptyHead)?;
     crate::validate::validate_session(session)?;
     let span = (last as i128 - first as i128) as f64;
-    let frames = (span / frame_ns).floor() as u128 + 1;
+    // Frame i lies at `first + round(i · frame_ns)`; keep every frame not after `last`.
+    let frames = ((span + 0.5) / frame_ns).floor() as u128 + 1;
     if frames > options.max_frames as u128 {
         return Err(AlignError::TooManyFrames {
             span_s: span / 1e9,
@@ -405,6 +406,18 @@ mod tests {
             video: None,
             context_features: None,
         }
+    }
+
+    #[test]
+    fn a_stream_sampled_at_the_timeline_rate_keeps_every_frame() {
+        // 86 samples at 30 fps with nanosecond-rounded times (the last at 2 833 333 333 ns):
+        // 86 frames, although 2.833333333 s × 30 is a hair under 85.
+        let timeline = Timeline { start_ns: 0, fps: 30.0, frames: 86 };
+        let times: Vec<i64> = (0..86).map(|i| timeline.timestamp_ns(i)).collect();
+        let head = Trajectory { timestamps_ns: times.clone(), poses: vec![RigidTransform::IDENTITY; 86] };
+        let a = align(&session(head), &AlignOptions::default()).unwrap();
+        assert_eq!(a.timeline.frames, 86);
+        assert!(a.head.valid.iter().all(|&v| v));
     }
 
     #[test]

@@ -1,0 +1,5 @@
+# Lets pytest import the `egoexo_train` package from this folder.
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))

@@ -1,0 +1,95 @@
+"""Export trained networks to ONNX for the Rust engine.
+
+- ``--egonet-only``: just ``egonet.onnx`` from a stage-1 checkpoint (the input of
+  ``egoexo synth --shards fusion --egonet``).
+- otherwise: one tracking mode's EgoNet, gate and fusion into ``models/<n>pt/`` and its entry in
+  ``models/manifest.json`` (other modes' entries are kept).
+
+Example: python -m egoexo_train.ship --ego runs/ego3/ego.pt --fusion runs/fusion3/fusion.pt --out models
+"""
+
+import argparse
+import json
+import subprocess
+from pathlib import Path
+
+import torch
+
+from .export import WINDOW, export_model_set, export_one, example_inputs
+from .model import EgoNet, Fusion, Gate
+
+
+def load(path: Path):
+    checkpoint = torch.load(path, map_location="cpu", weights_only=False)
+    return checkpoint["state"], checkpoint["config"]
+
+
+def build_egonet(ego_path: Path) -> tuple:
+    state, config = load(ego_path)
+    egonet = EgoNet(config["window"], config["egonet_hidden"])
+    egonet.load_state_dict(state["egonet"])
+    return egonet.eval(), config
+
+
+def git_commit() -> str:
+    try:
+        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--ego", type=Path, required=True, help="stage-1 checkpoint (ego.pt)")
+    parser.add_argument("--fusion", type=Path, help="stage-2 checkpoint (fusion.pt)")
+    parser.add_argument("--egonet-only", type=Path, metavar="FILE", help="write only egonet.onnx here")
+    parser.add_argument("--out", type=Path, default=Path("models"))
+    args = parser.parse_args()
+
+    egonet, ego_config = build_egonet(args.ego)
+    if args.egonet_only:
+        inputs = example_inputs(1, torch.Generator().manual_seed(0))
+        entry = export_one(egonet, inputs, ["ego"], ["root_6d", "body_6d"], args.egonet_only)
+        print(f"wrote {args.egonet_only} ({entry['bytes']} bytes, sha256 {entry['sha256']})")
+        return
+    if args.fusion is None:
+        parser.error("--fusion is required unless --egonet-only")
+
+    state, config = load(args.fusion)
+    gate = Gate(config["gate_features"], config["gate_hidden"])
+    gate.load_state_dict(state["gate"])
+    fusion = Fusion(config["window"], config["hidden"], config["heads"], config["spatial_layers"],
+                    config["temporal_layers"], dropout=0.0)
+    fusion.load_state_dict(state["fusion"])
+    points = 3 if config["tracking"] == "three_point" else 1
+    if ego_config["tracking"] != config["tracking"]:
+        raise SystemExit("the EgoNet and fusion checkpoints are for different tracking modes")
+    entry, _ = export_model_set(egonet, gate.eval(), fusion.eval(), points, config["max_observers"], config["hidden"],
+                                args.out, f"{points}pt")
+    if config["shard_index"].get("egonet_sha256") != entry["egonet"]["sha256"]:
+        raise SystemExit("the fusion network was trained on coarse poses from a different EgoNet export")
+
+    manifest_path = args.out / "manifest.json"
+    manifest = json.loads(manifest_path.read_text()) if manifest_path.exists() else {
+        "format_version": 1, "window": WINDOW, "fps": 30.0, "model_sets": [], "training": {}}
+    manifest["model_sets"] = [s for s in manifest["model_sets"] if s["tracking"] != entry["tracking"]] + [entry]
+    manifest["model_sets"].sort(key=lambda s: s["tracking"])
+    manifest["training"][entry["tracking"]] = {
+        "data": "CMU Graphics Lab Motion Capture Database (mocap.cs.cmu.edu) retargeted to SMPL; "
+                "simulated wearer devices, observers and 2D keypoints (egoexo-synth)",
+        "train_subjects": config["shard_index"]["subjects"],
+        "egonet": {k: ego_config[k] for k in ("steps", "batch", "lr", "seed", "egonet_hidden", "train_seconds",
+                                               "trainable_parameters", "train_windows")},
+        "fusion": {k: config[k] for k in ("steps", "batch", "lr", "seed", "hidden", "heads", "spatial_layers",
+                                          "temporal_layers", "gate_hidden", "train_seconds", "trainable_parameters",
+                                          "train_windows")},
+        "shards": config["shard_index"],
+        "commit": git_commit(),
+    }
+    manifest_path.write_text(json.dumps(manifest, indent=2) + "\n")
+    sizes = sum(entry[m]["bytes"] for m in ("egonet", "gate", "fusion"))
+    print(f"wrote {args.out}/{points}pt ({sizes / 1e6:.2f} MB) and {manifest_path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,230 @@
+"""Training of EgoNet (stage 1) and the gate + fusion networks (stage 2, EgoNet frozen).
+
+Reads the shards `egoexo synth --shards {ego,fusion}` writes (every input computed by the
+Rust core); the only computation here besides the networks is the differentiable FK of the
+position loss (`rotations.py`, parity-tested against Rust).
+
+Losses (paper § Training): L1 on the root orientation 6D (x 0.02), on the 21 body rotations
+6D (x 1) and on FK joint positions (x 1, metres). Positions are taken relative to the head
+joint, the joint the engine anchors to the tracked head device. Stage 2 adds two things the
+small simulated dataset needs, both documented in the model card:
+- observer dropout (all observers masked for 15 % of windows, each observer for 15 %), so the
+  same network runs ego-only;
+- gate dropout (the gate replaced by the plain validity mask for 25 % of windows), so the
+  ungated ablation is in-distribution, plus an auxiliary BCE (x 0.1) pulling the gate towards
+  the simulator's "visible and not occluded" labels.
+
+Example (the exact commands are in training/README.md):
+    python -m egoexo_train.train --stage ego --shards data/ego3 --val data/val-ego3 --out runs/ego3 --steps 3000
+"""
+
+import argparse
+import csv
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .model import EgoNet, Fusion, Gate
+from .rotations import forward_kinematics
+
+HEAD_JOINT = 15
+ROOT_WEIGHT, BODY_WEIGHT, POSITION_WEIGHT, GATE_AUX_WEIGHT = 0.02, 1.0, 1.0, 0.1
+
+EGO_KEYS = ["ego", "target", "frame_mask", "rest_joints"]
+BATCH_KEYS_EXTRA = ["target_positions"]
+FUSION_KEYS = EGO_KEYS + ["egonet", "rays", "ray_valid", "gate_features", "observer_mask", "occluded"]
+
+
+def load_shards(folder: Path, keys: list) -> dict:
+    """All shards of a folder, concatenated, as float32 torch tensors."""
+    index = json.loads((folder / "index.json").read_text())
+    parts = {k: [] for k in keys}
+    for entry in index["shards"]:
+        with np.load(folder / entry["file"]) as npz:
+            for k in keys:
+                parts[k].append(npz[k].astype(np.float32))
+    data = {k: torch.from_numpy(np.concatenate(v)) for k, v in parts.items()}
+    # The targets' head-relative joint positions never change: compute them once.
+    with torch.no_grad():
+        chunks = []
+        for i in range(0, data["target"].shape[0], 256):
+            pos = forward_kinematics(data["rest_joints"][i:i + 256], data["target"][i:i + 256])
+            chunks.append(pos - pos[:, :, HEAD_JOINT:HEAD_JOINT + 1])
+        data["target_positions"] = torch.cat(chunks)
+    data["index"] = index
+    return data
+
+
+def pose_losses(pred_root, pred_body, target, true_pos, rest, mask):
+    """(root L1, body L1, head-relative position L1 in metres, MPJPE in metres), each a
+    masked mean; `true_pos` are the targets' head-relative joint positions."""
+    w = mask.unsqueeze(-1)
+    denom = mask.sum().clamp(min=1.0)
+    root = ((pred_root - target[..., :6]).abs() * w).sum() / (denom * 6)
+    body = ((pred_body - target[..., 6:]).abs() * w).sum() / (denom * 126)
+    pred_pos = forward_kinematics(rest, torch.cat([pred_root, pred_body], dim=-1))
+    pred_pos = pred_pos - pred_pos[:, :, HEAD_JOINT:HEAD_JOINT + 1]
+    err = (pred_pos - true_pos).abs().mean(dim=(-1, -2))
+    position = (err * mask).sum() / denom
+    mpjpe = (((pred_pos - true_pos) ** 2).sum(-1).sqrt().mean(-1) * mask).sum() / denom
+    return root, body, position, mpjpe
+
+
+def fusion_inputs(batch, gate_net, train: bool, generator: torch.Generator):
+    """Gate, observer dropout and gate dropout -> (exo tokens, observer mask, gate values)."""
+    valid = batch["ray_valid"]
+    gate = gate_net(batch["gate_features"]) * valid
+    mask = batch["observer_mask"].clone()
+    if train:
+        b, t, n = mask.shape
+        drop_all = torch.rand(b, 1, 1, generator=generator) < 0.15
+        drop_one = torch.rand(b, 1, n, generator=generator) < 0.15
+        mask = mask * (~(drop_all | drop_one)).float()
+        ungated = (torch.rand(b, 1, 1, 1, generator=generator) < 0.25).float()
+        gate = ungated * valid + (1.0 - ungated) * gate
+    gate = gate * mask.unsqueeze(-1)
+    exo = torch.cat([batch["rays"] * gate.unsqueeze(-1), gate.unsqueeze(-1)], dim=-1)
+    return exo, mask, gate
+
+
+def gate_aux_loss(gate_net, batch):
+    valid = batch["ray_valid"]
+    target = valid * (1.0 - batch["occluded"])
+    g = gate_net(batch["gate_features"]).clamp(1e-5, 1 - 1e-5)
+    bce = -(target * g.log() + (1 - target) * (1 - g).log())
+    return (bce * valid).sum() / valid.sum().clamp(min=1.0)
+
+
+def batches(n: int, batch_size: int, generator: torch.Generator):
+    while True:
+        order = torch.randperm(n, generator=generator)
+        for i in range(0, n - batch_size + 1, batch_size):
+            yield order[i:i + batch_size]
+
+
+def take(data: dict, idx, keys) -> dict:
+    return {k: data[k][idx] for k in keys}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--stage", choices=["ego", "fusion"], required=True)
+    parser.add_argument("--shards", type=Path, required=True)
+    parser.add_argument("--val", type=Path, required=True)
+    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--egonet-hidden", type=int, default=256)
+    parser.add_argument("--hidden", type=int, default=128, help="fusion width d")
+    parser.add_argument("--heads", type=int, default=4)
+    parser.add_argument("--spatial-layers", type=int, default=2)
+    parser.add_argument("--temporal-layers", type=int, default=3)
+    parser.add_argument("--gate-hidden", type=int, default=128)
+    parser.add_argument("--steps", type=int, default=3000)
+    parser.add_argument("--batch", type=int, default=32)
+    parser.add_argument("--lr", type=float, default=1e-3)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--eval-every", type=int, default=200)
+    args = parser.parse_args()
+
+    torch.manual_seed(args.seed)
+    torch.set_num_threads(args.threads)
+    generator = torch.Generator().manual_seed(args.seed)
+    keys = EGO_KEYS if args.stage == "ego" else FUSION_KEYS
+    train_data = load_shards(args.shards, keys)
+    val_data = load_shards(args.val, keys)
+    index = train_data["index"]
+    if args.stage == "fusion" and val_data["index"].get("egonet_sha256") != index.get("egonet_sha256"):
+        raise SystemExit("validation shards were made with a different EgoNet than the training shards")
+    window = index["window"]
+    n_train = train_data["ego"].shape[0]
+    print(f"{args.stage}: {n_train} training windows, {val_data['ego'].shape[0]} validation windows, "
+          f"tracking {index['options']['tracking']}")
+
+    modules = {}
+    if args.stage == "ego":
+        egonet = EgoNet(window, args.egonet_hidden)
+        modules["egonet"] = egonet
+        params = list(egonet.parameters())
+    else:
+        n = train_data["observer_mask"].shape[-1]
+        features = train_data["gate_features"].shape[-1]
+        gate_net = Gate(features, args.gate_hidden)
+        fusion = Fusion(window, args.hidden, args.heads, args.spatial_layers, args.temporal_layers)
+        modules.update({"gate": gate_net, "fusion": fusion})
+        params = list(gate_net.parameters()) + list(fusion.parameters())
+    total_params = sum(p.numel() for p in params)
+    optimizer = torch.optim.AdamW(params, lr=args.lr, weight_decay=1e-4)
+    schedule = torch.optim.lr_scheduler.LambdaLR(
+        optimizer, lambda s: min(1.0, (s + 1) / 200) * 0.5 * (1 + math.cos(math.pi * min(s, args.steps) / args.steps)))
+
+    def forward(batch, train):
+        if args.stage == "ego":
+            return modules["egonet"](batch["ego"]), None
+        exo, mask, gate = fusion_inputs(batch, modules["gate"], train, generator)
+        return modules["fusion"](batch["ego"], batch["egonet"], exo, mask), gate
+
+    def evaluate():
+        for m in modules.values():
+            m.eval()
+        totals = np.zeros(5)
+        with torch.no_grad():
+            n_val = val_data["ego"].shape[0]
+            for i in range(0, n_val, 64):
+                batch = take(val_data, slice(i, i + 64), keys + BATCH_KEYS_EXTRA)
+                (root, body), _ = forward(batch, False)
+                r, b, p, mpjpe = pose_losses(root, body, batch["target"], batch["target_positions"], batch["rest_joints"], batch["frame_mask"])
+                loss = ROOT_WEIGHT * r + BODY_WEIGHT * b + POSITION_WEIGHT * p
+                w = batch["frame_mask"].sum().item()
+                totals += np.array([loss.item(), r.item(), b.item(), mpjpe.item(), 1.0]) * w
+        for m in modules.values():
+            m.train()
+        return totals[:4] / max(totals[4], 1.0)
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    log = open(args.out / "curve.csv", "w", newline="")
+    writer = csv.writer(log)
+    writer.writerow(["step", "seconds", "train_loss", "val_loss", "val_root_l1", "val_body_l1", "val_head_relative_mpjpe_cm", "lr"])
+    start = time.time()
+    running = []
+    stream = batches(n_train, args.batch, generator)
+    for step in range(1, args.steps + 1):
+        batch = take(train_data, next(stream), keys + BATCH_KEYS_EXTRA)
+        (root, body), _ = forward(batch, True)
+        r, b, p, _ = pose_losses(root, body, batch["target"], batch["target_positions"], batch["rest_joints"], batch["frame_mask"])
+        loss = ROOT_WEIGHT * r + BODY_WEIGHT * b + POSITION_WEIGHT * p
+        if args.stage == "fusion":
+            loss = loss + GATE_AUX_WEIGHT * gate_aux_loss(modules["gate"], batch)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(params, 1.0)
+        optimizer.step()
+        schedule.step()
+        running.append(loss.item())
+        if step % args.eval_every == 0 or step == args.steps:
+            val = evaluate()
+            elapsed = time.time() - start
+            writer.writerow([step, f"{elapsed:.1f}", f"{np.mean(running):.5f}", f"{val[0]:.5f}", f"{val[1]:.5f}",
+                             f"{val[2]:.5f}", f"{100 * val[3]:.2f}", f"{schedule.get_last_lr()[0]:.2e}"])
+            log.flush()
+            print(f"step {step:5d} {elapsed:7.0f}s train {np.mean(running):.4f} val {val[0]:.4f} "
+                  f"head-relative MPJPE {100 * val[3]:.2f} cm", flush=True)
+            running = []
+    seconds = time.time() - start
+    state = {name: m.state_dict() for name, m in modules.items()}
+    config = {k: v for k, v in vars(args).items() if not isinstance(v, Path)}
+    config.update({"window": window, "tracking": index["options"]["tracking"],
+                   "max_observers": index["options"]["max_observers"],
+                   "gate_features": index["gate_feature_dim"], "trainable_parameters": total_params,
+                   "train_seconds": seconds, "train_windows": n_train, "shard_index": {k: index[k] for k in (
+                       "subjects", "windows", "frames_simulated", "options", "egonet_sha256") if k in index}})
+    torch.save({"state": state, "config": config}, args.out / f"{args.stage}.pt")
+    (args.out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+    print(f"trained {total_params} parameters in {seconds / 60:.1f} min; saved {args.out / (args.stage + '.pt')}")
+
+
+if __name__ == "__main__":
+    main()

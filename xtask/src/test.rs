@@ -9,7 +9,7 @@ use crate::cmd::{self, TestCounts};
 use crate::tools;
 
 /// Crates whose tests also run compiled to wasm32 in headless Chromium.
-const WASM_TEST_CRATES: &[&str] = &["egoexo-core"];
+const WASM_TEST_CRATES: &[&str] = &["egoexo-core", "egoexo-viewer"];
 
 /// Single test targets (crate, test) that run compiled to wasm32 in headless Chromium, for
 /// crates whose other tests need native I/O.
@@ -25,6 +25,10 @@ const CHROMIUM_ARGS: &[&str] = &[
     "disable-quic",
     "disable-default-apps",
     "disable-extensions",
+    // WebGPU through SwiftShader: the viewer's tests render with it off-screen and check that
+    // it is refused for a canvas (headless Chromium cannot present it).
+    "enable-unsafe-webgpu",
+    "enable-unsafe-swiftshader",
 ];
 
 pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {

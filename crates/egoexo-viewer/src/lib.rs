@@ -1,0 +1,87 @@
+//! The page-side egoexo viewer: renders an [`egoexo_scene::SceneData`] with wgpu (WebGPU, with a
+//! WebGL2 fallback) and owns the 3D view's UI state — orbit camera, playback, layer toggles,
+//! keyboard shortcuts. It computes no geometry: every position in the scene is already in the
+//! world (Y-up, metres).
+//!
+//! # What is drawn
+//! A floor grid at `floor_y`; the reconstructed SMPL skeleton (joints as spheres, bones as
+//! cylinders; left blue, right orange, centre white) — translucent grey on frames that were
+//! not reconstructed (`valid[f] == false`), hidden where a frame holds no pose (all zeros) or a
+//! joint is not finite; the head and wrist device trajectories (whole session as faint lines, a
+//! trail of 2 s before / 1 s after the current frame, a ball at the device); each tracked
+//! observer as a camera frustum (from `camera_poses` and `half_fov`, with a small "up" marker)
+//! and its rays from the camera centre to the ray endpoints, coloured by gate (red 0 → yellow
+//! 0.5 → green 1); the ground truth as a translucent cyan ghost; the ego-only reconstruction as
+//! a translucent violet overlay.
+//!
+//! # JS API (`wasm-bindgen --target web`)
+//! ```js
+//! import init, { Viewer } from './pkg/egoexo_viewer.js';
+//! await init();
+//! const viewer = await Viewer.create(canvas, 'auto');   // or 'webgpu' | 'webgl2'
+//! viewer.backend();                  // 'webgpu' | 'webgl2': the one in use
+//! viewer.canvas();                   // the canvas drawn into (see "Canvas replacement")
+//! viewer.set_scene_json(bytes);      // Uint8Array of serde_json SceneData; throws Error on bad data
+//! viewer.has_ego_only(); viewer.has_ground_truth();
+//! viewer.set_show_ego_only(b); viewer.set_show_ground_truth(b); viewer.set_show_rays(b);
+//! viewer.play(); viewer.pause(); viewer.toggle_play(); viewer.is_playing();
+//! viewer.set_speed(x);               // × real time, 0.05..=16, throws outside
+//! viewer.step(n);                    // ±n whole frames, clamped, pauses; returns the frame
+//! viewer.seek(f);                    // rounded, clamped; keeps playing; returns the frame
+//! viewer.frame(); viewer.frames(); viewer.time(); viewer.fps(); viewer.speed();
+//! viewer.on_frame((frame, timeSeconds) => {});   // on every change of the shown frame, and once now
+//! viewer.resize(cssWidth, cssHeight, devicePixelRatio);
+//! viewer.reset_camera();             // frame the whole scene (also: double-click)
+//! viewer.render_now();               // draw synchronously (tests read the canvas back after it)
+//! viewer.failure();                  // undefined, or why drawing stopped for good
+//! viewer.free();
+//! const rgba = await Viewer.render_offscreen(sceneJsonBytes, frame, width, height, 'auto');
+//! ```
+//! `timeSeconds` counts from the first frame (`frame / fps`); the session clock adds
+//! `SceneData::start_s`. Errors are JS `Error`s whose message says what was wrong (the scene's
+//! field and expected length, the bad number, the missing backend).
+//!
+//! # Input
+//! Left drag orbits, right/middle drag (or Shift/Ctrl/⌘ + left drag) pans, the wheel zooms,
+//! double-click re-frames. Keys (on the window; ignored while typing in form fields, and Space
+//! is left to a focused button): Space play/pause, ←/→ one frame (pauses), Shift+←/→ one
+//! second, Home/End first/last frame. Playback runs on `requestAnimationFrame` inside the
+//! module and loops at the end.
+//!
+//! # Backends
+//! `auto` first gets a WebGPU device and *checks* that it can present: it clears a scratch
+//! canvas to a known colour, presents it, waits ~150 ms watching for a lost device or errors,
+//! and reads the canvas back. Headless Chromium with `--enable-unsafe-webgpu` gives a device
+//! that renders off-screen but loses it when presenting, so `auto` lands on WebGL2 there;
+//! without the flag there is no adapter and `auto` lands on WebGL2 too. `webgpu` runs the same
+//! check and throws when it fails; `webgl2` never touches WebGPU. If a WebGPU device is lost
+//! later, the viewer switches to WebGL2 by itself.
+//!
+//! # Canvas replacement
+//! A canvas keeps the first context type it was given. When the canvas already has another
+//! context (a viewer re-created on a canvas that held WebGPU, or the runtime fallback), the
+//! viewer puts a fresh `<canvas>` with the same attributes (id, class, style, size) in its
+//! place; the page should then use `viewer.canvas()` (or look the canvas up by id again).
+//!
+//! # Native builds
+//! Only the pure parts build natively ([`camera`], [`playback`], [`scene`], [`mesh`],
+//! [`colors`], [`example`]); wgpu, web-sys and the `Viewer` class exist on `wasm32` only.
+
+pub mod camera;
+pub mod colors;
+pub mod error;
+pub mod example;
+pub mod mesh;
+pub mod playback;
+pub mod scene;
+
+#[cfg(target_arch = "wasm32")]
+mod web;
+
+#[cfg(target_arch = "wasm32")]
+pub use web::Viewer;
+
+pub use error::{ActiveBackend, BackendPreference, ViewerError};
+
+#[cfg(all(test, target_arch = "wasm32"))]
+wasm_bindgen_test::wasm_bindgen_test_configure!(run_in_browser);

@@ -1,0 +1,522 @@
+//! From a [`SceneData`] to what the GPU draws: validation on arrival, the static lines (floor
+//! grid, whole device trajectories) built once, and the per-frame instances (skeletons,
+//! device trails, observer frustums, gated rays).
+//!
+//! Nothing here computes geometry beyond placing primitives: every position in the scene is
+//! already in the world (Y-up, metres). Non-finite positions are never drawn.
+
+use bytemuck::{Pod, Zeroable};
+use egoexo_core::exo_keypoints::{EXO_KEYPOINT_COUNT, ExoKeypoint};
+use egoexo_core::skeleton::NUM_JOINTS;
+use egoexo_scene::{ObserverScene, SceneData};
+use glam::{Quat, Vec3};
+use thiserror::Error;
+
+use crate::camera::Bounds;
+use crate::colors::{self, BodySide, Rgba};
+use crate::mesh::{self, LineVertex};
+
+/// The most frames a scene may have (about 46 h at 30 fps); bounds the array-size arithmetic.
+pub const MAX_FRAMES: usize = 5_000_000;
+
+/// Joint sphere radius of the reconstructed skeleton, metres.
+pub const JOINT_RADIUS: f32 = 0.028;
+/// Head joint sphere radius, metres.
+pub const HEAD_RADIUS: f32 = 0.075;
+/// Bone cylinder radius, metres.
+pub const BONE_RADIUS: f32 = 0.018;
+/// Device trail seconds shown before and after the current frame.
+pub const TRAIL_S: (f32, f32) = (2.0, 1.0);
+/// Radius of an observer ray's cylinder, metres.
+pub const RAY_RADIUS: f32 = 0.007;
+/// Depth at which the observer frustum is drawn, metres.
+pub const FRUSTUM_DEPTH: f32 = 0.3;
+/// Largest half field of view drawn (fisheye cameras exceed 90°), radians.
+pub const MAX_DRAWN_HALF_FOV: f32 = 1.2;
+
+/// Why a scene was refused.
+#[derive(Debug, Error)]
+pub enum SceneError {
+    #[error("scene JSON is not a SceneData: {0}")]
+    Json(#[from] serde_json::Error),
+    #[error("scene has {0} frames; the viewer accepts at most {MAX_FRAMES}")]
+    TooManyFrames(usize),
+    #[error("scene is inconsistent: {0}")]
+    Inconsistent(String),
+}
+
+/// Parses `serde_json` bytes of a [`SceneData`] and validates it ([`validate_scene`]).
+pub fn parse_scene(json: &[u8]) -> Result<SceneData, SceneError> {
+    let scene: SceneData = serde_json::from_slice(json)?;
+    validate_scene(&scene)?;
+    Ok(scene)
+}
+
+/// [`SceneData::check`] (array lengths, format version) plus what the viewer relies on: a
+/// positive finite rate, a tree of parents (each before its child), finite half-FOVs.
+pub fn validate_scene(scene: &SceneData) -> Result<(), SceneError> {
+    if scene.frames > MAX_FRAMES {
+        return Err(SceneError::TooManyFrames(scene.frames));
+    }
+    let mut problems: Vec<String> = scene.check().err().into_iter().collect();
+    if !(scene.fps.is_finite() && scene.fps > 0.0) {
+        problems.push(format!("fps is {}, expected a positive number", scene.fps));
+    }
+    for (child, &parent) in scene.parents.iter().enumerate() {
+        if parent != -1 && !(parent >= 0 && (parent as usize) < child) {
+            problems.push(format!("parents[{child}] = {parent}, expected -1 or a joint index below {child}"));
+        }
+    }
+    for o in &scene.observers {
+        if !o.half_fov.iter().all(|a| a.is_finite() && *a > 0.0) {
+            problems.push(format!("observer {} half_fov {:?}, expected positive radians", o.id, o.half_fov));
+        }
+    }
+    if !scene.floor_y.is_finite() {
+        problems.push(format!("floor_y is {}, expected a finite height", scene.floor_y));
+    }
+    if problems.is_empty() { Ok(()) } else { Err(SceneError::Inconsistent(problems.join("; "))) }
+}
+
+/// One instanced solid: a sphere at `a` (then `b == a`) or a cylinder from `a` to `b`, world
+/// metres; `radius` metres; display-encoded colour. Layout shared with the shaders (48 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct SolidInstance {
+    pub a: [f32; 3],
+    pub radius: f32,
+    pub b: [f32; 3],
+    pub _pad: f32,
+    pub colour: Rgba,
+}
+
+/// Everything drawn for one frame besides the static lines, split by pass: opaque solids
+/// write depth, translucent ones (alpha < 1) are blended over them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FrameDrawList {
+    pub spheres: Vec<SolidInstance>,
+    pub cylinders: Vec<SolidInstance>,
+    pub translucent_spheres: Vec<SolidInstance>,
+    pub translucent_cylinders: Vec<SolidInstance>,
+}
+
+impl FrameDrawList {
+    fn sphere(&mut self, centre: Vec3, radius: f32, colour: Rgba) {
+        if !centre.is_finite() {
+            return;
+        }
+        let instance = SolidInstance { a: centre.to_array(), radius, b: centre.to_array(), _pad: 0.0, colour };
+        if colour[3] < 1.0 { self.translucent_spheres.push(instance) } else { self.spheres.push(instance) }
+    }
+
+    fn cylinder(&mut self, a: Vec3, b: Vec3, radius: f32, colour: Rgba) {
+        if !(a.is_finite() && b.is_finite()) || a.distance_squared(b) < 1e-12 {
+            return;
+        }
+        let instance = SolidInstance { a: a.to_array(), radius, b: b.to_array(), _pad: 0.0, colour };
+        if colour[3] < 1.0 { self.translucent_cylinders.push(instance) } else { self.cylinders.push(instance) }
+    }
+
+    /// Number of instances over all passes.
+    pub fn len(&self) -> usize {
+        self.spheres.len() + self.cylinders.len() + self.translucent_spheres.len() + self.translucent_cylinders.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Every instance with its kind, for inspection.
+    pub fn all(&self) -> impl Iterator<Item = &SolidInstance> {
+        self.spheres.iter().chain(&self.cylinders).chain(&self.translucent_spheres).chain(&self.translucent_cylinders)
+    }
+}
+
+/// Which optional layers are drawn.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LayerToggles {
+    /// The ego-only reconstruction overlay (when the scene has one).
+    pub ego_only: bool,
+    /// The ground-truth ghost (when the scene has one).
+    pub ground_truth: bool,
+    /// Observer rays.
+    pub rays: bool,
+}
+
+impl Default for LayerToggles {
+    fn default() -> Self {
+        Self { ego_only: false, ground_truth: true, rays: true }
+    }
+}
+
+/// How one skeleton is drawn.
+#[derive(Clone, Copy, Debug)]
+struct SkeletonStyle {
+    /// Scale of the joint/bone radii.
+    thickness: f32,
+    /// `None` = side colours; `Some` = one colour for the whole skeleton.
+    colour: Option<Rgba>,
+    dimmed: bool,
+}
+
+/// The joints of frame `frame` in a flat `frames × 24 × 3` array, or `None` when the frame holds
+/// no pose at all (all zeros, as producers write for "nothing here").
+fn frame_joints(joints: &[f32], frame: usize) -> Option<[Vec3; NUM_JOINTS]> {
+    let flat = joints.get(frame * NUM_JOINTS * 3..(frame + 1) * NUM_JOINTS * 3)?;
+    if flat.iter().all(|&v| v == 0.0) {
+        return None;
+    }
+    Some(std::array::from_fn(|j| Vec3::new(flat[3 * j], flat[3 * j + 1], flat[3 * j + 2])))
+}
+
+fn push_skeleton(list: &mut FrameDrawList, joints: &[Vec3; NUM_JOINTS], parents: &[i8], style: SkeletonStyle) {
+    let colour = |joint: usize| {
+        let c = style.colour.unwrap_or_else(|| BodySide::of_joint(joint).colour());
+        if style.dimmed { colors::dimmed(c) } else { c }
+    };
+    for (j, &p) in joints.iter().enumerate() {
+        let radius = if j == egoexo_core::skeleton::SmplJoint::Head.index() { HEAD_RADIUS } else { JOINT_RADIUS };
+        list.sphere(p, radius * style.thickness, colour(j));
+    }
+    for (child, &parent) in parents.iter().enumerate().take(NUM_JOINTS) {
+        if let Ok(parent) = usize::try_from(parent)
+            && parent < NUM_JOINTS
+        {
+            // A bone takes its child's side (pelvis → left_hip is a left bone).
+            list.cylinder(joints[parent], joints[child], BONE_RADIUS * style.thickness, colour(child));
+        }
+    }
+}
+
+/// `T_world_camera` of observer `o` at `frame` (optical frame: +X right, +Y down, +Z forward),
+/// or `None` when the observer is not tracked then or its pose is not a rotation.
+pub fn observer_pose(o: &ObserverScene, frame: usize) -> Option<(Quat, Vec3)> {
+    if !o.valid.get(frame).copied().unwrap_or(false) {
+        return None;
+    }
+    let v = o.camera_poses.get(7 * frame..7 * frame + 7)?;
+    let q = Quat::from_xyzw(v[0], v[1], v[2], v[3]);
+    let t = Vec3::new(v[4], v[5], v[6]);
+    let norm = q.length();
+    if !(q.is_finite() && t.is_finite()) || (norm - 1.0).abs() > 0.01 {
+        return None;
+    }
+    Some((q / norm, t))
+}
+
+fn push_observer(list: &mut FrameDrawList, o: &ObserverScene, index: usize, frame: usize, show_rays: bool) {
+    let Some((rotation, centre)) = observer_pose(o, frame) else { return };
+    let colour = colors::OBSERVERS[index % colors::OBSERVERS.len()];
+    let [hx, hy] = o.half_fov.map(|a| a.clamp(0.05, MAX_DRAWN_HALF_FOV).tan() * FRUSTUM_DEPTH);
+    let d = FRUSTUM_DEPTH;
+    let to_world = |x: f32, y: f32, z: f32| centre + rotation * Vec3::new(x, y, z);
+    // Image corners: top-left, top-right, bottom-right, bottom-left (+Y is down in the image).
+    let corners = [to_world(-hx, -hy, d), to_world(hx, -hy, d), to_world(hx, hy, d), to_world(-hx, hy, d)];
+    const EDGE: f32 = 0.005;
+    list.sphere(centre, 0.035, colour);
+    for i in 0..4 {
+        list.cylinder(centre, corners[i], EDGE, colour);
+        list.cylinder(corners[i], corners[(i + 1) % 4], EDGE, colour);
+    }
+    // The image's "up": a small triangle over the top edge.
+    let apex = to_world(0.0, -1.6 * hy, d);
+    let (left, right) = (to_world(-0.5 * hx, -hy, d), to_world(0.5 * hx, -hy, d));
+    list.cylinder(left, apex, EDGE, colour);
+    list.cylinder(apex, right, EDGE, colour);
+    if !show_rays {
+        return;
+    }
+    for k in 0..EXO_KEYPOINT_COUNT {
+        let Some(r) = o.rays.get(4 * (frame * EXO_KEYPOINT_COUNT + k)..4 * (frame * EXO_KEYPOINT_COUNT + k) + 4) else {
+            continue;
+        };
+        let (end, gate) = (Vec3::new(r[0], r[1], r[2]), r[3]);
+        if end == Vec3::ZERO && gate == 0.0 {
+            continue; // no valid ray for this keypoint
+        }
+        let c = colors::gate_colour(gate);
+        list.cylinder(centre, end, RAY_RADIUS, c);
+        let radius = if ExoKeypoint::ALL[k] == ExoKeypoint::Nose { 0.02 } else { 0.016 };
+        list.sphere(end, radius, c);
+    }
+}
+
+/// The instances of frame `frame` (clamped to the scene): the reconstruction (dimmed where the
+/// frame was not reconstructed), the optional ego-only overlay and ground-truth ghost, device
+/// positions with a trail of [`TRAIL_S`], and each tracked observer's frustum and rays.
+pub fn build_frame(scene: &SceneData, frame: usize, layers: LayerToggles) -> FrameDrawList {
+    let mut list = FrameDrawList::default();
+    if scene.frames == 0 {
+        return list;
+    }
+    let frame = frame.min(scene.frames - 1);
+    let valid = scene.valid.get(frame).copied().unwrap_or(false);
+    if let Some(joints) = frame_joints(&scene.joints, frame) {
+        push_skeleton(
+            &mut list,
+            &joints,
+            &scene.parents,
+            SkeletonStyle { thickness: 1.0, colour: None, dimmed: !valid },
+        );
+    }
+    if layers.ego_only
+        && let Some(joints) = scene.ego_only_joints.as_deref().and_then(|j| frame_joints(j, frame))
+    {
+        let style = SkeletonStyle { thickness: 0.8, colour: Some(colors::EGO_ONLY), dimmed: !valid };
+        push_skeleton(&mut list, &joints, &scene.parents, style);
+    }
+    if layers.ground_truth
+        && let Some(joints) = scene.ground_truth_joints.as_deref().and_then(|j| frame_joints(j, frame))
+    {
+        let style = SkeletonStyle { thickness: 1.25, colour: Some(colors::GROUND_TRUTH), dimmed: false };
+        push_skeleton(&mut list, &joints, &scene.parents, style);
+    }
+
+    let fps = scene.fps.max(1e-3);
+    let back = (TRAIL_S.0 * fps).ceil() as usize;
+    let ahead = (TRAIL_S.1 * fps).ceil() as usize;
+    for device in &scene.devices {
+        let colour = colors::device_colour(&device.name);
+        let at = |f: usize| -> Option<Vec3> {
+            if !device.valid.get(f).copied().unwrap_or(false) {
+                return None;
+            }
+            let p = device.positions.get(3 * f..3 * f + 3)?;
+            Some(Vec3::new(p[0], p[1], p[2])).filter(|p| p.is_finite())
+        };
+        if let Some(p) = at(frame) {
+            list.sphere(p, if device.name == "head" { 0.03 } else { 0.022 }, colour);
+        }
+        let first = frame.saturating_sub(back);
+        let last = (frame + ahead).min(scene.frames - 1);
+        for f in first..last {
+            if let (Some(a), Some(b)) = (at(f), at(f + 1)) {
+                let c = if f < frame { colour } else { colors::with_alpha(colour, 0.35) };
+                list.cylinder(a, b, 0.006, c);
+            }
+        }
+    }
+
+    for (index, observer) in scene.observers.iter().enumerate() {
+        push_observer(&mut list, observer, index, frame, layers.rays);
+    }
+    list
+}
+
+/// The world box the view camera frames: every reconstructed joint (sampled to at most ~2000
+/// frames), tracked observer cameras, and the floor under them.
+pub fn scene_bounds(scene: &SceneData) -> Option<Bounds> {
+    let stride = scene.frames.div_ceil(2000).max(1);
+    let frames = (0..scene.frames).step_by(stride);
+    let joints = frames.clone().filter_map(|f| frame_joints(&scene.joints, f)).flatten();
+    let observers =
+        scene.observers.iter().flat_map(|o| frames.clone().filter_map(move |f| observer_pose(o, f).map(|(_, t)| t)));
+    let bounds = Bounds::around(joints.chain(observers))?;
+    let floor = Vec3::new(bounds.min.x, scene.floor_y, bounds.min.z);
+    Bounds::around([bounds.min, bounds.max, floor])
+}
+
+/// Lines drawn under everything for the whole session: the floor grid at `floor_y` around the
+/// scene, and each device's full trajectory (faint; broken where tracking is invalid).
+pub fn static_lines(scene: &SceneData) -> Vec<LineVertex> {
+    let bounds = scene_bounds(scene);
+    let (centre, half) = match bounds {
+        Some(b) => {
+            let c = b.centre();
+            let size = (b.max - b.min).max_element();
+            (c, (0.5 * size + 2.0).max(4.0))
+        }
+        None => (Vec3::ZERO, 4.0),
+    };
+    let mut lines = mesh::floor_grid(centre.x, centre.z, scene.floor_y, half, 0.5);
+    // Long sessions: at most ~20000 segments per device.
+    let stride = scene.frames.div_ceil(20_000).max(1);
+    for device in &scene.devices {
+        let colour = colors::with_alpha(colors::device_colour(&device.name), 0.3);
+        let at = |f: usize| -> Option<[f32; 3]> {
+            if !device.valid.get(f).copied().unwrap_or(false) {
+                return None;
+            }
+            let p = device.positions.get(3 * f..3 * f + 3)?;
+            p.iter().all(|v| v.is_finite()).then(|| [p[0], p[1], p[2]])
+        };
+        let samples: Vec<usize> = (0..scene.frames).step_by(stride).collect();
+        for pair in samples.windows(2) {
+            if let (Some(a), Some(b)) = (at(pair[0]), at(pair[1])) {
+                lines.push(LineVertex { position: a, colour });
+                lines.push(LineVertex { position: b, colour });
+            }
+        }
+    }
+    lines
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::example::example_scene;
+    #[cfg(target_arch = "wasm32")]
+    use wasm_bindgen_test::wasm_bindgen_test as test;
+
+    const ALL_LAYERS: LayerToggles = LayerToggles { ego_only: true, ground_truth: true, rays: true };
+
+    #[test]
+    fn the_example_scene_is_valid_and_survives_json() {
+        let scene = example_scene(30);
+        validate_scene(&scene).unwrap();
+        let json = serde_json::to_vec(&scene).unwrap();
+        assert_eq!(parse_scene(&json).unwrap(), scene);
+    }
+
+    #[test]
+    fn bad_scenes_get_messages_naming_the_field() {
+        let err = |bytes: &[u8]| parse_scene(bytes).unwrap_err().to_string();
+        assert!(err(b"{").contains("scene JSON is not a SceneData"), "{}", err(b"{"));
+        assert!(err(b"{\"format_version\": 1}").contains("missing field"));
+        let mut scene = example_scene(4);
+        scene.joints.truncate(10);
+        scene.fps = 0.0;
+        scene.parents[3] = 7;
+        let msg = err(&serde_json::to_vec(&scene).unwrap());
+        assert!(msg.contains("joints has 10 values, expected 288"), "{msg}");
+        assert!(msg.contains("fps is 0"), "{msg}");
+        assert!(msg.contains("parents[3] = 7"), "{msg}");
+        let mut huge = example_scene(1);
+        huge.frames = usize::MAX;
+        assert!(matches!(validate_scene(&huge), Err(SceneError::TooManyFrames(_))));
+        let mut fov = example_scene(2);
+        fov.observers[0].half_fov = [f32::NAN, 0.5];
+        assert!(validate_scene(&fov).unwrap_err().to_string().contains("half_fov"));
+    }
+
+    #[test]
+    fn a_valid_frame_draws_a_side_coloured_opaque_skeleton() {
+        let scene = example_scene(10);
+        let list = build_frame(&scene, 3, LayerToggles { ego_only: false, ground_truth: false, rays: false });
+        let count = |c: Rgba| list.spheres.iter().filter(|s| s.colour == c).count();
+        // 24 joints: 9 left, 9 right, 6 centre.
+        assert_eq!((count(colors::LEFT), count(colors::RIGHT), count(colors::CENTRE)), (9, 9, 6));
+        let bones = |c: Rgba| list.cylinders.iter().filter(|s| s.colour == c).count();
+        assert_eq!(bones(colors::LEFT) + bones(colors::RIGHT) + bones(colors::CENTRE), 23);
+        assert_eq!(bones(colors::LEFT), 9);
+        // The left wrist's sphere sits on the left wrist joint.
+        let left_wrist = Vec3::from_slice(&scene.joints[(3 * 24 + 20) * 3..]);
+        assert!(list.spheres.iter().any(|s| Vec3::from(s.a) == left_wrist && s.colour == colors::LEFT));
+        assert!(list.all().all(|s| s.a.iter().chain(&s.b).all(|v| v.is_finite())));
+    }
+
+    #[test]
+    fn invalid_frames_are_dimmed_and_empty_frames_hidden() {
+        let mut scene = example_scene(10);
+        scene.valid[5] = false;
+        let layers = LayerToggles { ego_only: false, ground_truth: false, rays: false };
+        let list = build_frame(&scene, 5, layers);
+        let skeleton: Vec<_> = list.translucent_spheres.iter().filter(|s| s.radius >= JOINT_RADIUS).collect();
+        assert_eq!(skeleton.len(), 24);
+        assert!(skeleton.iter().all(|s| s.colour[3] < 0.5));
+        assert!(!list.spheres.iter().any(|s| s.colour == colors::LEFT));
+        // All-zero joints mean "no pose": nothing is drawn for the skeleton.
+        scene.joints[5 * 72..6 * 72].fill(0.0);
+        let list = build_frame(&scene, 5, layers);
+        assert!(!list.all().any(|s| s.radius == JOINT_RADIUS || s.radius == BONE_RADIUS));
+        // A non-finite joint hides that joint and its bones only.
+        let mut scene = example_scene(3);
+        scene.joints[(24 + 20) * 3] = f32::NAN; // frame 1, left wrist
+        let list = build_frame(&scene, 1, layers);
+        assert_eq!(list.spheres.iter().filter(|s| s.radius == JOINT_RADIUS || s.radius == HEAD_RADIUS).count(), 23);
+        assert_eq!(list.cylinders.iter().filter(|s| s.radius == BONE_RADIUS).count(), 21);
+    }
+
+    #[test]
+    fn layers_toggle_the_overlay_ghost_and_rays() {
+        let scene = example_scene(6);
+        let none = build_frame(&scene, 2, LayerToggles { ego_only: false, ground_truth: false, rays: false });
+        let all = build_frame(&scene, 2, ALL_LAYERS);
+        let with = |c: Rgba| all.all().filter(|s| s.colour == c).count();
+        assert_eq!(with(colors::EGO_ONLY), 24 + 23);
+        assert_eq!(with(colors::GROUND_TRUTH), 24 + 23);
+        assert!(none.all().all(|s| s.colour != colors::EGO_ONLY && s.colour != colors::GROUND_TRUTH));
+        // Rays: one cylinder + endpoint per keypoint with a ray, gate-coloured.
+        let gates: Vec<f32> = (0..13).map(|k| scene.observers[0].rays[4 * (2 * 13 + k) + 3]).collect();
+        for g in gates {
+            assert!(all.all().any(|s| s.colour == colors::gate_colour(g)), "gate {g}");
+        }
+        assert_eq!(all.len() - none.len(), 2 * (24 + 23) + 2 * 13);
+        // The ghost and overlay are translucent.
+        assert!(all.spheres.iter().all(|s| s.colour[3] == 1.0));
+    }
+
+    #[test]
+    fn rays_start_at_the_observer_and_end_at_their_endpoints() {
+        let scene = example_scene(4);
+        let list = build_frame(&scene, 1, ALL_LAYERS);
+        let (_, centre) = observer_pose(&scene.observers[0], 1).unwrap();
+        let ray = &scene.observers[0].rays[4 * 13..4 * 13 + 4];
+        assert!(list.cylinders.iter().any(|c| Vec3::from(c.a) == centre
+            && Vec3::from(c.b) == Vec3::new(ray[0], ray[1], ray[2])
+            && c.colour == colors::gate_colour(ray[3])));
+    }
+
+    #[test]
+    fn untracked_observers_and_missing_rays_are_not_drawn() {
+        let mut scene = example_scene(4);
+        let baseline = build_frame(&scene, 1, ALL_LAYERS).len();
+        // A keypoint without a ray (zero endpoint, gate 0) draws nothing.
+        scene.observers[0].rays[4 * 13..4 * 13 + 4].fill(0.0);
+        assert_eq!(build_frame(&scene, 1, ALL_LAYERS).len(), baseline - 2);
+        scene.observers[0].valid[1] = false;
+        let list = build_frame(&scene, 1, ALL_LAYERS);
+        assert!(list.all().all(|s| !colors::OBSERVERS.contains(&s.colour)));
+        // A pose that is not a rotation is skipped rather than drawn distorted.
+        let mut scene = example_scene(4);
+        scene.observers[0].camera_poses[7..11].copy_from_slice(&[0.0, 0.0, 0.0, 3.0]);
+        assert!(observer_pose(&scene.observers[0], 1).is_none());
+    }
+
+    #[test]
+    fn the_frustum_opens_along_the_camera_z_axis() {
+        let scene = example_scene(2);
+        let (q, c) = observer_pose(&scene.observers[0], 0).unwrap();
+        let forward = q * Vec3::Z;
+        let list = build_frame(&scene, 0, LayerToggles { rays: false, ..ALL_LAYERS });
+        let edges: Vec<_> = list.cylinders.iter().filter(|s| s.colour == colors::OBSERVERS[0]).collect();
+        assert_eq!(edges.len(), 10);
+        for e in edges.iter().filter(|e| Vec3::from(e.a) == c) {
+            let depth = (Vec3::from(e.b) - c).dot(forward);
+            assert!((depth - FRUSTUM_DEPTH).abs() < 1e-4, "{depth}");
+        }
+    }
+
+    #[test]
+    fn device_trails_follow_the_current_frame() {
+        let scene = example_scene(200);
+        let list = build_frame(&scene, 100, LayerToggles::default());
+        let head = colors::HEAD_DEVICE;
+        let past = list.cylinders.iter().filter(|s| s.colour == head).count();
+        let future = list.translucent_cylinders.iter().filter(|s| s.colour == colors::with_alpha(head, 0.35)).count();
+        let fps = scene.fps;
+        assert_eq!(past, (TRAIL_S.0 * fps) as usize);
+        assert_eq!(future, (TRAIL_S.1 * fps) as usize);
+        // Invalid samples break the trail.
+        let mut broken = scene.clone();
+        broken.devices[0].valid[95] = false;
+        let list = build_frame(&broken, 100, LayerToggles::default());
+        assert_eq!(list.cylinders.iter().filter(|s| s.colour == head).count(), past - 2);
+    }
+
+    #[test]
+    fn static_lines_lie_on_the_floor_and_trace_devices() {
+        let scene = example_scene(50);
+        let lines = static_lines(&scene);
+        let floor = lines.iter().filter(|v| v.position[1] == scene.floor_y).count();
+        assert!(floor > 40);
+        let devices = scene.devices.len();
+        assert_eq!(lines.len() - floor, devices * 2 * 49);
+        let bounds = scene_bounds(&scene).unwrap();
+        assert!(bounds.min.y <= scene.floor_y && bounds.max.y > 1.5);
+        let empty = SceneData::new("e", 30.0, 0, "ego-exo");
+        assert!(build_frame(&empty, 0, ALL_LAYERS).is_empty());
+        assert!(scene_bounds(&empty).is_none());
+        assert!(!static_lines(&empty).is_empty());
+    }
+}

@@ -1,0 +1,93 @@
+//! The CLI end to end on real CMU motion: `mocap import` → `synth` (sessions and shards) →
+//! `inspect` accepts every simulated session → `reconstruct` writes every format → `eval`
+//! prints both tables. Networks are the engine's untrained fixture (the numbers are not the
+//! point here; the plumbing is). Skipped, with a message, when `shared/data/cmu` is absent.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn cmu_dir() -> Option<PathBuf> {
+    let dir = std::env::var_os("EGOEXO_CMU_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/cmu"));
+    if dir.join("CMU_data.csv").is_file() {
+        Some(dir)
+    } else {
+        eprintln!("SKIPPED: the CMU data is not at {} (set EGOEXO_CMU_DIR)", dir.display());
+        None
+    }
+}
+
+fn egoexo(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_egoexo")).args(args).output().expect("egoexo runs")
+}
+
+fn ok(args: &[&str]) -> String {
+    let out = egoexo(args);
+    assert!(out.status.success(), "egoexo {args:?} failed:\n{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn fixture_models() -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../egoexo-infer/tests/fixtures/models").display().to_string()
+}
+
+#[test]
+fn simulate_inspect_reconstruct_and_evaluate() {
+    let Some(cmu) = cmu_dir() else { return };
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("pipeline");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let lib = dir.join("lib.safetensors");
+    let s = |p: &Path| p.display().to_string();
+    ok(&["mocap", "import", &s(&cmu), "-o", &s(&lib), "--subjects", "2,9"]);
+
+    // Sessions that inspect accepts.
+    let sessions = dir.join("sessions");
+    let out = ok(&["synth", "--lib", &s(&lib), "--subjects", "2", "--observers", "2", "--tracking", "3", "--seed", "7", "-o", &s(&sessions)]);
+    assert!(out.contains("wrote 3 sessions"), "{out}");
+    let mut files: Vec<_> = std::fs::read_dir(&sessions).unwrap().map(|e| e.unwrap().path()).collect();
+    files.sort();
+    assert_eq!(files.len(), 3);
+    for f in &files {
+        let report = ok(&["inspect", &s(f)]);
+        assert!(report.contains("observer-2") && report.contains("Ground truth"), "{report}");
+    }
+
+    // Every output format.
+    for ext in ["npz", "bvh", "glb", "csv", "json"] {
+        let out_file = dir.join(format!("motion.{ext}"));
+        let out = ok(&["reconstruct", &s(&files[0]), "-o", &s(&out_file), "--models", &fixture_models()]);
+        assert!(out.contains("ego-exo, 3-point"), "{out}");
+        assert!(std::fs::metadata(&out_file).unwrap().len() > 1000);
+    }
+    let ego_only = ok(&["reconstruct", &s(&files[0]), "-o", &s(&dir.join("ego.csv")), "--models", &fixture_models(), "--ego-only", "--tracking", "1"]);
+    assert!(ego_only.contains("ego-only, 1-point"), "{ego_only}");
+
+    // Training shards.
+    let shards = dir.join("shards");
+    let out = ok(&["synth", "--lib", &s(&lib), "--subjects", "2", "--observers", "3", "--shards", "ego", "--simulations", "1", "-o", &s(&shards)]);
+    assert!(out.contains("windows in"), "{out}");
+    assert!(shards.join("index.json").is_file() && shards.join("shard-0000.npz").is_file());
+
+    // The evaluation table, with and without networks.
+    let table = ok(&["eval", "--lib", &s(&lib), "--subjects", "9", "--observers", "1", "--tracking", "3", "--seed", "7"]);
+    assert!(table.contains("rest-pose") && table.contains("nearest-neighbour") && table.contains("occluded frames"), "{table}");
+    let json = ok(&["eval", "--lib", &s(&lib), "--subjects", "9", "--observers", "1", "--tracking", "1", "--models", &fixture_models(), "--json"]);
+    let report: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(report["tracking"], 1);
+    let methods: Vec<_> = report["rows"].as_array().unwrap().iter().map(|r| r["method"].as_str().unwrap().to_string()).collect();
+    assert_eq!(methods, ["rest-pose", "nearest-neighbour", "ego-only", "ego-exo", "ego-exo-ungated"]);
+    assert!(report["occluded_rows"].is_array());
+}
+
+#[test]
+fn bad_arguments_fail_with_a_message() {
+    let out = egoexo(&["eval", "--lib", "/nonexistent.safetensors", "--subjects", "1"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent.safetensors"));
+    let out = egoexo(&["reconstruct", "/nonexistent.egoexo", "-o", "/tmp/x.xyz"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("xyz") || err.contains("nonexistent"), "{err}");
+}

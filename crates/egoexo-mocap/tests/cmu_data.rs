@@ -261,6 +261,24 @@ fn stored_error_statistics_match_a_recomputation_from_the_library() {
 }
 
 #[test]
+fn the_parallel_tree_import_is_deterministic() {
+    let dir = require_cmu!();
+    let tree = egoexo_mocap::fs::scan_cmu_tree(&dir).unwrap();
+    let catalog = common::catalog(&dir);
+    let subjects = [2, 16];
+    let run =
+        || egoexo_mocap::fs::import_tree(&tree, &catalog, &ImportOptions::default(), Some(&subjects), &|_| {}).unwrap();
+    let (a, b) = (run(), run());
+    assert!(a.failures.is_empty() && a.trials > 0);
+    assert_eq!(a.library.as_bytes(), b.library.as_bytes(), "two imports give the same library, byte for byte");
+    // Each clip is what a sequential import of its trial gives.
+    let importer = common::subject(&dir, 16);
+    let sequential = import(&importer, &dir, 15, &catalog_entry(&dir, 16, 15));
+    let i = a.library.find("16_15").unwrap();
+    assert_eq!(a.library.motion(i).unwrap().poses, sequential.clips[0].poses);
+}
+
+#[test]
 fn resampling_follows_the_true_capture_rate() {
     let dir = require_cmu!();
     let importer = common::subject(&dir, 2);

@@ -11,32 +11,52 @@
 //!    positions of [`CMU_TO_SMPL`] (the mapping of `shared/data/cmu/README.md`).
 //! 2. The SMPL skeleton is the mean shape scaled uniformly so its head height matches the
 //!    subject's standing head height measured on the ASF ([`standing_head_height`]).
-//! 3. The torso keeps SMPL's own shape and follows the CMU torso's rotations: spine1,
-//!    spine2, neck, collars, head and feet take their CMU segment's rotation since the rest
-//!    pose (`W`); the pelvis and spine3 take the least-squares rotation (Horn's quaternion
-//!    method) of their three child bones onto the CMU ones, relative to the same fit in the
-//!    rest pose. So a neutral CMU posture gives a neutral SMPL posture even though the two
-//!    skeletons place their joints differently (SMPL's neck joint sits ~5 cm behind its
-//!    head joint, its spine is curved, CMU's is straight).
+//! 3. The torso keeps SMPL's own shape and follows the CMU torso's rotations: pelvis,
+//!    spine1–3, neck, collars, head and feet start from their CMU segment's rotation since
+//!    the rest pose (`W`; spine2 and spine3 both from `thorax`). So a neutral CMU posture
+//!    starts as a neutral SMPL posture even though the two skeletons place their joints
+//!    differently (SMPL's neck joint sits ~5 cm behind its head joint, its spine is
+//!    curved, CMU's is straight). The head and feet keep exactly the CMU rotation (a
+//!    head-mounted device follows the subject's real head).
 //! 4. The limbs (hips, knees, ankles, shoulders, elbows, wrists) are fitted to bone
 //!    directions: twist from the CMU segment, swung by the smallest rotation that aims the
-//!    SMPL bone from the joint's *fitted* position at the child's target. CMU's rest legs
-//!    splay about 20° while SMPL's hang straight, so rest directions are aligned once per
-//!    skeleton and Euler angles are never copied.
-//! 5. [`REFINE_ITERATIONS`] rounds: the translation moves by the mean residual over all
-//!    joints, then each limb joint takes a damped Gauss–Newton step that moves its limb
-//!    below it onto the targets, spreading a limb's length mismatch over its joints.
+//!    SMPL bone from the joint's *fitted* position at the child's target (wrists: along the
+//!    CMU wrist → hand direction). CMU's rest legs splay about 20° while SMPL's hang
+//!    straight, so rest directions are aligned once per skeleton and Euler angles are never
+//!    copied.
+//! 5. [`REFINE_ROUNDS`] rounds of
+//!    - a Gauss–Newton step of the translation and the seven torso rotations (pelvis,
+//!      spine1–3, neck, collars) towards the targets, with a penalty on each joint's *bend*
+//!      away from the CMU segments (its local rotation's deviation; for the pelvis its
+//!      orientation; the head's bend, since its global rotation is fixed, holds the neck)
+//!      that stiffens past 15°: the torso may lean a few degrees to absorb the skeletons'
+//!      different proportions, never fold;
+//!    - [`LIMB_SWEEPS_PER_ROUND`] sweeps of a damped Gauss–Newton step per limb joint that
+//!      moves its limb below it onto the targets, spreading a limb's length mismatch over
+//!      its joints, each after moving the translation by the mean residual.
 //!
-//! Design note, measured on the shared subset (mean joint error): fitting every joint to
-//! positions reaches 2.6 cm but bends SMPL's spine and neck to make up for the skeletons'
-//! different joint placement (a neutral CMU T-pose came out with the neck bent ~80°);
-//! keeping the torso's shape gives 3.05 cm with natural postures. The remaining error is
-//! the shape difference (pelvis/hips/neck ~4–5 cm), not motion.
+//! Design note, measured on the shared subset (mean / p95 joint error over 159 trials):
+//! - fitting every joint to positions freely reaches 2.6 cm but bends SMPL's spine and
+//!   neck to make up for the skeletons' different proportions (a neutral CMU T-pose came
+//!   out with the neck bent ~80°);
+//! - copying the torso rotations exactly (pelvis and spine3 from their child bones):
+//!   3.05 / 5.45 cm;
+//! - the penalised torso fit: 2.79 / 5.25 cm; with the collar targets at SMPL's collar
+//!   proportion (see [`CMU_TO_SMPL`]) 2.71 / 5.15 cm (the collar mapping alone, with the
+//!   copied torso: 2.97 cm); with the wrists along the CMU bone direction (step 4)
+//!   2.72 / 5.15 cm. Bends from the CMU segments: mean 1–3° (pelvis, spine,
+//!   neck), 4° (head), 11° (collars); largest in any frame 10° (spine), 7° (neck), 12°
+//!   (head), 14° (pelvis), 24° (collars); in the neutral T-pose at most 6° (collars 14°).
+//!   Half the penalty gives 2.66 cm for bends about 1.6 times as large.
+//!
+//! The remaining error is the skeletons' proportions (SMPL scaled to the head height has
+//! ~6 cm shorter legs and a ~6 cm longer torso than CMU's subjects; its hips sit ~4 cm
+//! further back): pelvis, hips, neck and head keep ~4.5 cm.
 //!
 //! The retarget error of a frame is the distance between each target and the fitted SMPL
 //! joint (forward kinematics of the output pose), over all 24 joints.
 
-use egoexo_core::glam::{Mat3, Quat, Vec3};
+use egoexo_core::glam::{DMat3, DVec3, Mat3, Quat, Vec3};
 use egoexo_core::skeleton::{JOINT_NAMES, NUM_BODY_JOINTS, NUM_JOINTS, PARENTS, SkeletonError, SmplPose, SmplSkeleton};
 use thiserror::Error;
 
@@ -44,6 +64,11 @@ use crate::kinematics::{CmuBoneTransforms, CmuSkeleton};
 
 /// Each SMPL joint as a weighted blend of CMU bone *starts* (where a bone begins: the end
 /// of its parent). `root` is the root's position.
+///
+/// The mapping of `shared/data/cmu/README.md`, except that the collars sit 45% (not "about
+/// 35%") of the way from the clavicle's start (the neck base) to the shoulder: that is
+/// where SMPL's mean-shape collar joints sit between its spine and its shoulders (45–47%),
+/// and it brings the collar error from about 3.4 to 2.5 cm.
 pub const CMU_TO_SMPL: [&[(&str, f32)]; NUM_JOINTS] = [
     &[("root", 1.0)],                           // pelvis
     &[("lfemur", 1.0)],                         // left_hip
@@ -58,8 +83,8 @@ pub const CMU_TO_SMPL: [&[(&str, f32)]; NUM_JOINTS] = [
     &[("ltoes", 1.0)],                          // left_foot
     &[("rtoes", 1.0)],                          // right_foot
     &[("upperneck", 1.0)],                      // neck
-    &[("lclavicle", 0.65), ("lhumerus", 0.35)], // left_collar
-    &[("rclavicle", 0.65), ("rhumerus", 0.35)], // right_collar
+    &[("lclavicle", 0.55), ("lhumerus", 0.45)], // left_collar
+    &[("rclavicle", 0.55), ("rhumerus", 0.45)], // right_collar
     &[("head", 1.0)],                           // head
     &[("lhumerus", 1.0)],                       // left_shoulder
     &[("rhumerus", 1.0)],                       // right_shoulder
@@ -71,10 +96,9 @@ pub const CMU_TO_SMPL: [&[(&str, f32)]; NUM_JOINTS] = [
     &[("rhand", 1.0)],                          // right_hand
 ];
 
-/// The CMU segment whose world rotation gives each SMPL joint's twist (the segment that
-/// spans the SMPL bone from the joint to its child, or the joint's own segment for the
-/// feet and head; for the pelvis and spine3, fitted from positions, the fallback when the
-/// positions are degenerate). `None`: identity (hands).
+/// The CMU segment whose world rotation each SMPL joint starts from (for a limb joint its
+/// twist: the segment that spans the SMPL bone from the joint to its child; the joint's
+/// own segment for the torso, feet and head). `None`: identity (hands).
 const TWIST_SEGMENT: [Option<&str>; NUM_JOINTS] = [
     Some("root"),
     Some("lfemur"),
@@ -105,43 +129,49 @@ const TWIST_SEGMENT: [Option<&str>; NUM_JOINTS] = [
 /// How a joint's global rotation is found.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Fit {
-    /// Torso joints with three children (pelvis, spine3): the least-squares rotation of the
-    /// child bones onto the CMU targets, relative to the same fit in the rest pose.
-    ThreeChildren([usize; 3]),
+    /// Torso joints (pelvis, spine, neck, collars): the CMU segment's rotation since its
+    /// rest pose, then a small penalised correction towards the targets ([`TorsoPenalty`]).
+    Torso,
     /// Limb joints: twist from the CMU segment, swung to aim the bone at this child's
     /// target from the joint's fitted position; refined afterwards.
     Aim(usize),
-    /// The CMU segment's rotation since its rest pose (spine, neck, collars, head, feet).
+    /// Wrists: twist from the CMU segment, swung onto the CMU bone's direction (joint
+    /// target → this child's target); not refined itself, only carried along by the
+    /// refinement of the joints above. The hand target is too close to the wrist for its
+    /// position to steer the wrist: aimed from the fitted wrist, a subject with a short CMU
+    /// forearm (05) had its wrists bent 40–67° in the T-pose.
+    Direction(usize),
+    /// Exactly the CMU segment's rotation since its rest pose (head, feet).
     Segment,
     /// Same as the parent (SMPL hands: not part of the 21 body rotations).
     Parent,
 }
 
 const FIT: [Fit; NUM_JOINTS] = [
-    Fit::ThreeChildren([1, 2, 3]),    // pelvis
-    Fit::Aim(4),                      // left_hip
-    Fit::Aim(5),                      // right_hip
-    Fit::Segment,                     // spine1
-    Fit::Aim(7),                      // left_knee
-    Fit::Aim(8),                      // right_knee
-    Fit::Segment,                     // spine2
-    Fit::Aim(10),                     // left_ankle
-    Fit::Aim(11),                     // right_ankle
-    Fit::ThreeChildren([12, 13, 14]), // spine3
-    Fit::Segment,                     // left_foot
-    Fit::Segment,                     // right_foot
-    Fit::Segment,                     // neck
-    Fit::Segment,                     // left_collar
-    Fit::Segment,                     // right_collar
-    Fit::Segment,                     // head
-    Fit::Aim(18),                     // left_shoulder
-    Fit::Aim(19),                     // right_shoulder
-    Fit::Aim(20),                     // left_elbow
-    Fit::Aim(21),                     // right_elbow
-    Fit::Aim(22),                     // left_wrist
-    Fit::Aim(23),                     // right_wrist
-    Fit::Parent,                      // left_hand
-    Fit::Parent,                      // right_hand
+    Fit::Torso,         // pelvis
+    Fit::Aim(4),        // left_hip
+    Fit::Aim(5),        // right_hip
+    Fit::Torso,         // spine1
+    Fit::Aim(7),        // left_knee
+    Fit::Aim(8),        // right_knee
+    Fit::Torso,         // spine2
+    Fit::Aim(10),       // left_ankle
+    Fit::Aim(11),       // right_ankle
+    Fit::Torso,         // spine3
+    Fit::Segment,       // left_foot
+    Fit::Segment,       // right_foot
+    Fit::Torso,         // neck
+    Fit::Torso,         // left_collar
+    Fit::Torso,         // right_collar
+    Fit::Segment,       // head
+    Fit::Aim(18),       // left_shoulder
+    Fit::Aim(19),       // right_shoulder
+    Fit::Aim(20),       // left_elbow
+    Fit::Aim(21),       // right_elbow
+    Fit::Direction(22), // left_wrist
+    Fit::Direction(23), // right_wrist
+    Fit::Parent,        // left_hand
+    Fit::Parent,        // right_hand
 ];
 
 /// Errors setting up a retarget.
@@ -216,9 +246,6 @@ pub struct Retargeter {
     /// and for limb joints also the swing from SMPL's rest bone direction onto CMU's (CMU's
     /// rest legs splay about 20°).
     rest_alignment: [Quat; NUM_JOINTS],
-    /// For the three-children joints: the least-squares rotation of SMPL's rest child bones
-    /// onto CMU's rest child bones (the two skeletons' shape difference, removed per frame).
-    rest_fit: [Quat; NUM_JOINTS],
     head_height: f32,
     scale: f32,
     /// Per SMPL joint, every joint below it.
@@ -279,19 +306,12 @@ impl Retargeter {
         let rest = smpl.rest_joints();
         let mut rest_alignment = [facing; NUM_JOINTS];
         for j in 0..NUM_JOINTS {
-            if let Fit::Aim(c) = FIT[j] {
+            if let Fit::Aim(c) | Fit::Direction(c) = FIT[j] {
                 let smpl_dir = (facing * (rest[c] - rest[j])).normalize_or_zero();
                 let cmu_dir = (rest_targets[c] - rest_targets[j]).normalize_or_zero();
                 if smpl_dir != Vec3::ZERO && cmu_dir != Vec3::ZERO {
                     rest_alignment[j] = Quat::from_rotation_arc(smpl_dir, cmu_dir) * facing;
                 }
-            }
-        }
-        let mut rest_fit = [Quat::IDENTITY; NUM_JOINTS];
-        for j in 0..NUM_JOINTS {
-            if let Fit::ThreeChildren(children) = FIT[j] {
-                let pairs = children.map(|c| (rest[c] - rest[j], rest_targets[c] - rest_targets[j]));
-                rest_fit[j] = best_rotation(&pairs).unwrap_or(facing);
             }
         }
         let descendants = std::array::from_fn(|j| {
@@ -305,7 +325,7 @@ impl Retargeter {
                 })
                 .collect()
         });
-        Ok(Self { map, twist_segment, smpl, rest_alignment, rest_fit, head_height, scale, descendants })
+        Ok(Self { map, twist_segment, smpl, rest_alignment, head_height, scale, descendants })
     }
 
     /// The scaled SMPL skeleton the poses drive.
@@ -333,11 +353,17 @@ impl Retargeter {
         let targets = self.map.positions(fk);
         let mut pelvis = targets[0];
         let mut global = self.fit_rotations(fk, &targets, pelvis);
-        for _ in 0..REFINE_ITERATIONS {
-            let fitted = self.positions_from_globals(&global, pelvis);
-            let shift: Vec3 = (0..NUM_JOINTS).map(|j| targets[j] - fitted[j]).sum::<Vec3>() / NUM_JOINTS as f32;
-            pelvis += shift;
-            self.refine(&mut global, pelvis, &targets);
+        let copied = global;
+        for _ in 0..REFINE_ROUNDS {
+            self.fit_torso(&mut global, &copied, &mut pelvis, &targets);
+            for sweep in 0..LIMB_SWEEPS_PER_ROUND {
+                if sweep > 0 {
+                    let fitted = self.positions_from_globals(&global, pelvis);
+                    let shift: Vec3 = (0..NUM_JOINTS).map(|j| targets[j] - fitted[j]).sum::<Vec3>() / NUM_JOINTS as f32;
+                    pelvis += shift;
+                }
+                self.refine(&mut global, pelvis, &targets);
+            }
         }
         let pose = self.pose_from_globals(&global, pelvis);
         let fitted = self.smpl.forward_kinematics(&pose).positions;
@@ -347,21 +373,33 @@ impl Retargeter {
 
     /// SMPL joint positions for global rotations and a pelvis position.
     fn positions_from_globals(&self, global: &[Quat; NUM_JOINTS], pelvis: Vec3) -> [Vec3; NUM_JOINTS] {
-        let rest = self.smpl.rest_joints();
-        let mut p = [Vec3::ZERO; NUM_JOINTS];
-        p[0] = pelvis;
-        for j in 1..NUM_JOINTS {
-            let parent = PARENTS[j] as usize;
-            p[j] = p[parent] + global[parent] * (rest[j] - rest[parent]);
+        positions_from_globals(self.smpl.rest_joints(), global, pelvis)
+    }
+
+    /// One Gauss–Newton step of the translation and the torso joints' rotations towards the
+    /// targets ([`torso_step`]). `copied` holds the CMU-copied global rotations.
+    fn fit_torso(
+        &self,
+        global: &mut [Quat; NUM_JOINTS],
+        copied: &[Quat; NUM_JOINTS],
+        pelvis: &mut Vec3,
+        targets: &[Vec3; NUM_JOINTS],
+    ) {
+        let p = self.positions_from_globals(global, *pelvis);
+        let deviation = TORSO_JOINTS.map(|j| canonical(global[j] * copied[j].conjugate()).to_scaled_axis());
+        let Some((shift, rotations)) = torso_step(&p, targets, &deviation, &TORSO_PENALTY) else { return };
+        *pelvis += shift;
+        for (slot, &j) in TORSO_JOINTS.iter().enumerate() {
+            global[j] = (Quat::from_scaled_axis(rotations[slot]) * global[j]).normalize();
         }
-        p
     }
 
     /// One sweep down the limbs: each limb joint's rotation is corrected by a Gauss–Newton
     /// step of the rotation (about the joint) that best moves the rest of its limb onto the
     /// targets, which spreads a limb's length mismatch over its joints instead of piling it
     /// on the hand or foot. Damping towards no correction keeps the CMU twist where the limb
-    /// does not determine it (a straight limb). Torso joints are not touched.
+    /// does not determine it (a straight limb). Torso joints are not touched (see
+    /// `fit_torso`).
     fn refine(&self, global: &mut [Quat; NUM_JOINTS], pelvis: Vec3, targets: &[Vec3; NUM_JOINTS]) {
         let mut p = self.positions_from_globals(global, pelvis);
         for j in 1..=NUM_BODY_JOINTS {
@@ -417,25 +455,17 @@ impl Retargeter {
             }
             let segment = self.twist_segment[j].map(|b| fk.rotations[b]);
             global[j] = match FIT[j] {
-                Fit::ThreeChildren(children) => {
-                    // From the CMU joint, not the fitted one: the torso follows the CMU
-                    // torso and does not bend to make up for the skeletons' differences.
-                    let pairs = children.map(|c| (rest[c] - rest[j], targets[c] - targets[j]));
-                    match best_rotation(&pairs) {
-                        Some(fit) => (fit * self.rest_fit[j].conjugate() * self.rest_alignment[j]).normalize(),
-                        None => segment.unwrap_or(Quat::IDENTITY) * self.rest_alignment[j],
-                    }
-                }
-                Fit::Aim(c) => {
+                fit @ (Fit::Aim(c) | Fit::Direction(c)) => {
                     let candidate = (segment.unwrap_or(Quat::IDENTITY) * self.rest_alignment[j]).normalize();
                     let bone = candidate * (rest[c] - rest[j]);
-                    let wanted = targets[c] - position[j];
+                    let from = if matches!(fit, Fit::Aim(_)) { position[j] } else { targets[j] };
+                    let wanted = targets[c] - from;
                     match (bone.try_normalize(), wanted.try_normalize()) {
                         (Some(from), Some(to)) => (Quat::from_rotation_arc(from, to) * candidate).normalize(),
                         _ => candidate,
                     }
                 }
-                Fit::Segment => segment.unwrap_or(Quat::IDENTITY) * self.rest_alignment[j],
+                Fit::Torso | Fit::Segment => segment.unwrap_or(Quat::IDENTITY) * self.rest_alignment[j],
                 Fit::Parent => global[PARENTS[j] as usize],
             };
         }
@@ -443,11 +473,260 @@ impl Retargeter {
     }
 }
 
-/// Rounds of moving the pelvis by the mean residual and refining the chains.
-pub const REFINE_ITERATIONS: usize = 12;
+/// Rounds of the refinement: a torso fit (with the translation), then
+/// [`LIMB_SWEEPS_PER_ROUND`] limb sweeps.
+pub const REFINE_ROUNDS: usize = 6;
+
+/// Limb sweeps per refinement round, each but the first after moving the translation by
+/// the mean residual (the limbs converge more slowly than the torso fit).
+pub const LIMB_SWEEPS_PER_ROUND: usize = 4;
 
 /// Damping of a refinement step, m² (a 5 cm lever on each axis).
 const REFINE_DAMPING_M2: f32 = 0.0025;
+
+/// One Gauss–Newton step of the translation and the torso joints' rotations ([`TORSO_JOINTS`])
+/// that moves SMPL joints at `p` towards `targets` (metres, world frame), penalising how far
+/// each torso joint bends away from the CMU segments. `deviation` is each torso joint's
+/// current global deviation from its CMU-copied rotation (world-frame rotation vector,
+/// rad). Returns the translation step (m) and each torso joint's rotation step (world-frame
+/// rotation vector, rad, applied as `exp(δ) · R`), or `None` when the system is singular.
+///
+/// Linearised, a small world-frame rotation `δ_j` of torso joint `j` turns only its own
+/// bones (the limbs keep their global rotations and move along; the limb refinement re-aims
+/// them), so a joint `k` moves by `Δt + Σ δ_j × b_j` over the torso joints `j` above it,
+/// `b_j` being the bone from `j` towards `k`. Every joint of a limb shares the Jacobian of
+/// the limb's first joint, so the normal equations are summed per attachment.
+fn torso_step(
+    p: &[Vec3; NUM_JOINTS],
+    targets: &[Vec3; NUM_JOINTS],
+    deviation: &[Vec3; TORSO_JOINTS.len()],
+    penalty: &TorsoPenalty,
+) -> Option<(Vec3, [Vec3; TORSO_JOINTS.len()])> {
+    let mut residual = [DVec3::ZERO; NUM_JOINTS];
+    for k in 0..NUM_JOINTS {
+        residual[ATTACHMENT[k]] += (targets[k] - p[k]).as_dvec3();
+    }
+    let mut h = [[0.0f64; TORSO_UNKNOWNS]; TORSO_UNKNOWNS];
+    let mut g = [0.0f64; TORSO_UNKNOWNS];
+    let add = |h: &mut [[f64; TORSO_UNKNOWNS]; TORSO_UNKNOWNS], row: usize, col: usize, m: DMat3| {
+        for c in 0..3 {
+            let column = m.col(c);
+            for r in 0..3 {
+                h[row + r][col + c] += column[r];
+            }
+        }
+    };
+    for &(a, count) in ATTACHMENTS.iter() {
+        let n = count as f64;
+        let r = residual[a];
+        // The torso joints above `a` (unknown offset, bone towards `a`).
+        let mut chain = [(0usize, DVec3::ZERO); TORSO_JOINTS.len()];
+        let mut len = 0;
+        let (mut c, mut up) = (a, PARENTS[a]);
+        while up >= 0 {
+            let j = up as usize;
+            if let Some(slot) = TORSO_SLOT[j] {
+                chain[len] = (3 + 3 * slot, (p[c] - p[j]).as_dvec3());
+                len += 1;
+            }
+            c = j;
+            up = PARENTS[j];
+        }
+        let chain = &chain[..len];
+        add(&mut h, 0, 0, DMat3::from_diagonal(DVec3::splat(n)));
+        for d in 0..3 {
+            g[d] += r[d];
+        }
+        for (i, &(oi, bi)) in chain.iter().enumerate() {
+            // ∂p/∂δ_i = −[b_i]×.
+            let cross = skew(bi) * n;
+            add(&mut h, 0, oi, -cross);
+            add(&mut h, oi, 0, cross);
+            let gi = bi.cross(r);
+            for d in 0..3 {
+                g[oi + d] += gi[d];
+            }
+            for &(oj, bj) in &chain[i..] {
+                // (−[b_i]×)ᵀ(−[b_j]×) = (b_i·b_j) I − b_j b_iᵀ.
+                let m = (DMat3::from_diagonal(DVec3::splat(bi.dot(bj))) - outer_d(bj, bi)) * n;
+                add(&mut h, oi, oj, m);
+                if oi != oj {
+                    add(&mut h, oj, oi, m.transpose());
+                }
+            }
+        }
+    }
+    // Penalised bends: the deviation of each torso joint's local rotation from the CMU
+    // segments', to first order e_j − e_parent with e the global deviation; the pelvis
+    // bends against the world (its orientation), and the head, whose global rotation is
+    // the CMU head's, bends by −e_neck.
+    let deviation = deviation.map(|e| e.as_dvec3());
+    let mut bend_terms = [(0usize, None::<usize>, 0.0f64); TORSO_JOINTS.len() + 1];
+    for (slot, &j) in TORSO_JOINTS.iter().enumerate() {
+        let parent = if j == 0 { None } else { TORSO_SLOT[PARENTS[j] as usize] };
+        bend_terms[slot] = (slot, parent, penalty.lambda[slot]);
+    }
+    bend_terms[TORSO_JOINTS.len()] = (NECK_SLOT, None, penalty.head);
+    for &(slot, parent, lambda) in &bend_terms {
+        let bend = deviation[slot] - parent.map_or(DVec3::ZERO, |ps| deviation[ps]);
+        let lambda = lambda * (1.0 + (bend.length() / penalty.soft_limit).powi(2));
+        let a = 3 + 3 * slot;
+        for d in 0..3 {
+            h[a + d][a + d] += lambda;
+            g[a + d] -= lambda * bend[d];
+            if let Some(ps) = parent {
+                let b = 3 + 3 * ps;
+                h[b + d][b + d] += lambda;
+                h[a + d][b + d] -= lambda;
+                h[b + d][a + d] -= lambda;
+                g[b + d] += lambda * bend[d];
+            }
+        }
+    }
+    let x = solve_spd(h, g)?;
+    let shift = DVec3::new(x[0], x[1], x[2]).as_vec3();
+    let rotations = std::array::from_fn(|slot| {
+        let o = 3 + 3 * slot;
+        DVec3::new(x[o], x[o + 1], x[o + 2]).as_vec3()
+    });
+    Some((shift, rotations))
+}
+
+/// Joint positions (metres) of a skeleton with rest joints `rest` for global joint rotations
+/// (rest → now) and a pelvis position.
+fn positions_from_globals(rest: &[Vec3; NUM_JOINTS], global: &[Quat; NUM_JOINTS], pelvis: Vec3) -> [Vec3; NUM_JOINTS] {
+    let mut p = [Vec3::ZERO; NUM_JOINTS];
+    p[0] = pelvis;
+    for j in 1..NUM_JOINTS {
+        let parent = PARENTS[j] as usize;
+        p[j] = p[parent] + global[parent] * (rest[j] - rest[parent]);
+    }
+    p
+}
+
+/// Torso joints whose rotations the torso fit corrects: pelvis, spine1–3, neck, collars.
+const TORSO_JOINTS: [usize; 7] = [0, 3, 6, 9, 12, 13, 14];
+const TORSO_SLOT: [Option<usize>; NUM_JOINTS] = {
+    let mut slots = [None; NUM_JOINTS];
+    let mut i = 0;
+    while i < TORSO_JOINTS.len() {
+        slots[TORSO_JOINTS[i]] = Some(i);
+        i += 1;
+    }
+    slots
+};
+/// The neck's place in [`TORSO_JOINTS`].
+const NECK_SLOT: usize = 4;
+const _: () = assert!(TORSO_JOINTS[NECK_SLOT] == 12);
+const TORSO_UNKNOWNS: usize = 3 + 3 * TORSO_JOINTS.len();
+
+/// Per SMPL joint, the joint whose Jacobian it shares in the torso fit: itself for the
+/// pelvis and the joints whose parent is a torso joint, else its parent's.
+const ATTACHMENT: [usize; NUM_JOINTS] = {
+    let mut a = [0; NUM_JOINTS];
+    let mut j = 1;
+    while j < NUM_JOINTS {
+        let parent = PARENTS[j] as usize;
+        a[j] = if TORSO_SLOT[parent].is_some() { j } else { a[parent] };
+        j += 1;
+    }
+    a
+};
+/// The distinct attachments and how many joints each carries.
+const ATTACHMENTS: [(usize, u32); 12] = {
+    let mut out = [(0, 0); 12];
+    let mut n = 0;
+    let mut j = 0;
+    while j < NUM_JOINTS {
+        if ATTACHMENT[j] == j {
+            let mut count = 0;
+            let mut k = 0;
+            while k < NUM_JOINTS {
+                if ATTACHMENT[k] == j {
+                    count += 1;
+                }
+                k += 1;
+            }
+            out[n] = (j, count);
+            n += 1;
+        }
+        j += 1;
+    }
+    assert!(n == 12);
+    out
+};
+
+/// How strongly the torso fit holds each torso joint to the CMU segments: the squared bend
+/// `θ²` (rad²) is weighed against the sum of squared joint errors (m²) by
+/// `λ (1 + (θ / soft_limit)²)`, the weight re-evaluated each round; `λ = 0.01` makes a
+/// 0.1 rad (5.7°) bend cost as much as a 1 cm error.
+struct TorsoPenalty {
+    /// Per torso joint ([`TORSO_JOINTS`] order), m²/rad².
+    lambda: [f64; TORSO_JOINTS.len()],
+    /// The head's bend against the neck (the head's global rotation is the CMU head's, so
+    /// this holds the neck's global rotation to CMU's).
+    head: f64,
+    /// Bend beyond which the penalty stiffens quickly, rad.
+    soft_limit: f64,
+}
+
+/// Chosen on the shared CMU subset (see the module's design note): the spine and pelvis
+/// stiff, the neck and head less so, the collars (shoulder girdle, which moves freely in
+/// life) softest.
+const TORSO_PENALTY: TorsoPenalty = TorsoPenalty {
+    //       pelvis spine1 spine2 spine3 neck  l_collar r_collar
+    lambda: [0.04, 0.04, 0.04, 0.04, 0.02, 0.005, 0.005],
+    head: 0.02,
+    soft_limit: 15.0 * std::f64::consts::PI / 180.0,
+};
+
+/// `[v]×`: the matrix with `[v]× · u = v × u`.
+fn skew(v: DVec3) -> DMat3 {
+    DMat3::from_cols(DVec3::new(0.0, v.z, -v.y), DVec3::new(-v.z, 0.0, v.x), DVec3::new(v.y, -v.x, 0.0))
+}
+
+fn outer_d(a: DVec3, b: DVec3) -> DMat3 {
+    DMat3::from_cols(a * b.x, a * b.y, a * b.z)
+}
+
+/// Solves `h · x = g` for a symmetric positive definite `h` (Cholesky, f64).
+fn solve_spd<const N: usize>(mut h: [[f64; N]; N], g: [f64; N]) -> Option<[f64; N]> {
+    for j in 0..N {
+        let mut d = h[j][j];
+        for k in 0..j {
+            d -= h[j][k] * h[j][k];
+        }
+        if d.is_nan() || d <= 0.0 {
+            return None;
+        }
+        let d = d.sqrt();
+        h[j][j] = d;
+        for i in (j + 1)..N {
+            let mut s = h[i][j];
+            for k in 0..j {
+                s -= h[i][k] * h[j][k];
+            }
+            h[i][j] = s / d;
+        }
+    }
+    let mut y = [0.0f64; N];
+    for i in 0..N {
+        let mut s = g[i];
+        for k in 0..i {
+            s -= h[i][k] * y[k];
+        }
+        y[i] = s / h[i][i];
+    }
+    let mut x = [0.0f64; N];
+    for i in (0..N).rev() {
+        let mut s = y[i];
+        for k in (i + 1)..N {
+            s -= h[k][i] * x[k];
+        }
+        x[i] = s / h[i][i];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
 
 fn outer(a: Vec3, b: Vec3) -> Mat3 {
     Mat3::from_cols(a * b.x, a * b.y, a * b.z)
@@ -458,103 +737,107 @@ fn canonical(q: Quat) -> Quat {
     if q.w < 0.0 { -q } else { q }
 }
 
-/// The rotation `R` minimising `Σ |R·a − b|²` over pairs `(a, b)` (Horn 1987, quaternion
-/// form, in f64). `None` when the pairs do not determine a rotation (fewer than two
-/// independent directions).
-pub fn best_rotation(pairs: &[(Vec3, Vec3)]) -> Option<Quat> {
-    let mut s = [[0.0f64; 3]; 3];
-    for (a, b) in pairs {
-        let (a, b) = (a.as_dvec3(), b.as_dvec3());
-        for r in 0..3 {
-            for c in 0..3 {
-                s[r][c] += a[r] * b[c];
-            }
-        }
-    }
-    let [[sxx, sxy, sxz], [syx, syy, syz], [szx, szy, szz]] = s;
-    let n = [
-        [sxx + syy + szz, syz - szy, szx - sxz, sxy - syx],
-        [syz - szy, sxx - syy - szz, sxy + syx, szx + sxz],
-        [szx - sxz, sxy + syx, -sxx + syy - szz, syz + szy],
-        [sxy - syx, szx + sxz, syz + szy, -sxx - syy + szz],
-    ];
-    let (values, vectors) = symmetric_eigen4(n);
-    let mut order = [0, 1, 2, 3];
-    order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
-    let (top, second) = (values[order[0]], values[order[1]]);
-    let scale = values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    if !(scale.is_finite() && scale > 0.0) || top - second <= 1e-9 * scale {
-        return None;
-    }
-    let v = vectors[order[0]];
-    let q = Quat::from_xyzw(v[1] as f32, v[2] as f32, v[3] as f32, v[0] as f32);
-    q.is_finite().then(|| canonical(q))
-}
-
-/// Eigen-decomposition of a symmetric 4×4 matrix by cyclic Jacobi rotations: eigenvalues
-/// and the matching unit eigenvectors.
-fn symmetric_eigen4(mut a: [[f64; 4]; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
-    let mut v = [[0.0f64; 4]; 4];
-    for (i, row) in v.iter_mut().enumerate() {
-        row[i] = 1.0;
-    }
-    for _sweep in 0..50 {
-        let off: f64 = (0..4).flat_map(|p| ((p + 1)..4).map(move |q| (p, q))).map(|(p, q)| a[p][q] * a[p][q]).sum();
-        if off < 1e-30 {
-            break;
-        }
-        for p in 0..4 {
-            for q in (p + 1)..4 {
-                if a[p][q].abs() < 1e-300 {
-                    continue;
-                }
-                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-                // signum(0.0) = 1: the rotation by 45° when the diagonal entries are equal.
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                for k in 0..4 {
-                    let (akp, akq) = (a[k][p], a[k][q]);
-                    a[k][p] = c * akp - s * akq;
-                    a[k][q] = s * akp + c * akq;
-                }
-                for k in 0..4 {
-                    let (apk, aqk) = (a[p][k], a[q][k]);
-                    a[p][k] = c * apk - s * aqk;
-                    a[q][k] = s * apk + c * aqk;
-                }
-                for row in v.iter_mut() {
-                    let (vkp, vkq) = (row[p], row[q]);
-                    row[p] = c * vkp - s * vkq;
-                    row[q] = s * vkp + c * vkq;
-                }
-            }
-        }
-    }
-    let values = [a[0][0], a[1][1], a[2][2], a[3][3]];
-    // Column k of `v` is the eigenvector of values[k].
-    let vectors = std::array::from_fn(|k| std::array::from_fn(|r| v[r][k]));
-    (values, vectors)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use egoexo_core::glam::EulerRot;
+
+    /// SMPL mean-shape joint positions for global rotations and a pelvis position.
+    fn positions(global: &[Quat; NUM_JOINTS], pelvis: Vec3) -> [Vec3; NUM_JOINTS] {
+        positions_from_globals(SmplSkeleton::mean_shape().rest_joints(), global, pelvis)
+    }
+
+    /// A posture with every joint turned somewhat (deterministic).
+    fn posture() -> [Quat; NUM_JOINTS] {
+        std::array::from_fn(|j| {
+            let a = j as f32;
+            Quat::from_euler(EulerRot::YXZ, 0.3 * (a * 1.3).sin(), 0.4 * (a * 0.7).cos(), 0.2 * (a * 2.1).sin())
+        })
+    }
+
+    const FREE: TorsoPenalty =
+        TorsoPenalty { lambda: [1e-9; TORSO_JOINTS.len()], head: 1e-9, soft_limit: std::f64::consts::PI };
 
     #[test]
-    fn best_rotation_recovers_a_known_rotation() {
-        let r = Quat::from_euler(egoexo_core::glam::EulerRot::YXZ, 1.0, -0.4, 2.5);
-        let pairs: Vec<(Vec3, Vec3)> =
-            [Vec3::new(0.1, -0.1, 0.02), Vec3::new(-0.1, -0.1, 0.0), Vec3::new(0.0, 0.12, -0.01)]
-                .map(|a| (a, r * a))
-                .to_vec();
-        let q = best_rotation(&pairs).unwrap();
-        assert!(q.angle_between(r) < 1e-4, "{}", q.angle_between(r));
+    fn the_torso_table_matches_the_fit_table() {
+        for j in 0..NUM_JOINTS {
+            assert_eq!(FIT[j] == Fit::Torso, TORSO_SLOT[j].is_some(), "joint {j}");
+        }
+        // Every joint shares the Jacobian of exactly one attachment.
+        assert_eq!(ATTACHMENTS.iter().map(|&(_, n)| n).sum::<u32>(), NUM_JOINTS as u32);
+        assert_eq!(ATTACHMENT[22], 16);
+        assert_eq!(ATTACHMENT[10], 1);
+        assert_eq!(ATTACHMENT[15], 15);
     }
 
     #[test]
-    fn best_rotation_rejects_a_single_direction() {
-        assert_eq!(best_rotation(&[(Vec3::X, Vec3::Y), (Vec3::X * 2.0, Vec3::Y * 2.0)]), None);
-        assert_eq!(best_rotation(&[]), None);
+    fn solve_spd_solves_a_positive_definite_system() {
+        const N: usize = 6;
+        let m: [[f64; N]; N] = std::array::from_fn(|r| std::array::from_fn(|c| ((r * 7 + c * 3) % 5) as f64 - 2.0));
+        let mut h = [[0.0; N]; N];
+        for r in 0..N {
+            for c in 0..N {
+                h[r][c] = (0..N).map(|k| m[k][r] * m[k][c]).sum::<f64>() + if r == c { 0.5 } else { 0.0 };
+            }
+        }
+        let x: [f64; N] = std::array::from_fn(|i| i as f64 - 2.5);
+        let g: [f64; N] = std::array::from_fn(|r| (0..N).map(|c| h[r][c] * x[c]).sum());
+        let solved = solve_spd(h, g).unwrap();
+        for i in 0..N {
+            assert!((solved[i] - x[i]).abs() < 1e-9, "{solved:?}");
+        }
+        assert_eq!(solve_spd([[0.0; N]; N], g), None);
+    }
+
+    #[test]
+    fn a_torso_step_recovers_a_small_torso_motion() {
+        // Targets: the same posture with each torso joint turned a little more and the body
+        // moved; the limbs keep their global rotations. One unpenalised step recovers it
+        // (to second order).
+        let global = posture();
+        let pelvis = Vec3::new(0.3, 0.9, -0.2);
+        let turns: [Vec3; TORSO_JOINTS.len()] =
+            std::array::from_fn(|i| Vec3::new(0.02 * (i as f32 - 3.0), 0.015, -0.01 * i as f32));
+        let shift = Vec3::new(0.01, -0.02, 0.015);
+        let mut moved = global;
+        for (slot, &j) in TORSO_JOINTS.iter().enumerate() {
+            moved[j] = Quat::from_scaled_axis(turns[slot]) * global[j];
+        }
+        let p = positions(&global, pelvis);
+        let targets = positions(&moved, pelvis + shift);
+        let (t, r) = torso_step(&p, &targets, &[Vec3::ZERO; TORSO_JOINTS.len()], &FREE).unwrap();
+        assert!(t.distance(shift) < 1e-3, "{t} vs {shift}");
+        // The pelvis (three bones) is fully determined; a one-bone joint only up to a turn
+        // about its bone, so check where the step puts the joints.
+        assert!(r[0].distance(turns[0]) < 4e-3, "{} vs {}", r[0], turns[0]);
+        let mut stepped = global;
+        for (slot, &j) in TORSO_JOINTS.iter().enumerate() {
+            stepped[j] = Quat::from_scaled_axis(r[slot]) * global[j];
+        }
+        let after = positions(&stepped, pelvis + t);
+        let before = (0..NUM_JOINTS).map(|k| p[k].distance(targets[k])).fold(0.0, f32::max);
+        let left = (0..NUM_JOINTS).map(|k| after[k].distance(targets[k])).fold(0.0, f32::max);
+        assert!(before > 0.02 && left < 1e-3, "{before} m before, {left} m after");
+    }
+
+    #[test]
+    fn the_penalty_pulls_the_torso_back_to_the_cmu_segments() {
+        // Joints exactly on their targets, but the spine3 and neck bent away from the CMU
+        // segments: the step turns them back, and the more so the stiffer the penalty.
+        let global = posture();
+        let p = positions(&global, Vec3::ZERO);
+        let mut deviation = [Vec3::ZERO; TORSO_JOINTS.len()];
+        deviation[3] = Vec3::new(0.2, 0.0, 0.0);
+        deviation[NECK_SLOT] = Vec3::new(0.2, 0.0, 0.0);
+        let (_, soft) = torso_step(&p, &p, &deviation, &TORSO_PENALTY).unwrap();
+        let stiff = TorsoPenalty { lambda: TORSO_PENALTY.lambda.map(|l| l * 100.0), head: 100.0, ..TORSO_PENALTY };
+        let (_, hard) = torso_step(&p, &p, &deviation, &stiff).unwrap();
+        for slot in [3, NECK_SLOT] {
+            assert!(soft[slot].x < 0.0 && hard[slot].x < soft[slot].x, "{} {}", soft[slot], hard[slot]);
+            assert!((hard[slot].x + 0.2).abs() < 0.02, "stiff: back to the segments, {}", hard[slot]);
+        }
+        // Nothing to do: no step.
+        let (t, r) = torso_step(&p, &p, &[Vec3::ZERO; TORSO_JOINTS.len()], &TORSO_PENALTY).unwrap();
+        assert!(t.length() < 1e-6 && r.iter().all(|v| v.length() < 1e-6));
     }
 }

@@ -6,7 +6,8 @@
 mod common;
 
 use egoexo_core::glam::{Quat, Vec3};
-use egoexo_core::skeleton::{NUM_JOINTS, SmplJoint};
+use egoexo_core::skeleton::{NUM_JOINTS, PARENTS, SmplJoint, SmplPose};
+use egoexo_mocap::kinematics::CmuBoneTransforms;
 use egoexo_mocap::{CatalogEntry, ImportOptions, MotionLibrary, SubjectImporter, TrialImport};
 
 const FEET: [usize; 4] = [7, 8, 10, 11];
@@ -127,10 +128,11 @@ fn retarget_error_is_within_target_on_a_sample_of_clips() {
         let import = import(&importer, &dir, trial, entry);
         for clip in &import.clips {
             let r = &clip.info.retarget;
-            // The target is 3 cm; the natural-torso retarget reaches 3.05 cm over the
-            // whole subset (see `retarget`'s design note) and 2.3–3.2 cm per clip here.
+            // The target is 3 cm; the retarget reaches 2.71 cm over the whole subset
+            // (see `retarget`'s design note) and 1.8–2.9 cm per clip here.
+            eprintln!("{}: mean {:.3} cm, p95 {:.2} cm", clip.info.label(), r.mean_cm, r.p95_cm);
             assert!(
-                r.mean_cm <= 3.5 && r.p95_cm <= 6.5,
+                r.mean_cm <= 3.2 && r.p95_cm <= 6.0,
                 "{}: mean {} cm, p95 {} cm",
                 clip.info.label(),
                 r.mean_cm,
@@ -144,21 +146,67 @@ fn retarget_error_is_within_target_on_a_sample_of_clips() {
         }
     }
     let mean = sum / frames;
-    assert!(mean <= 3.1, "mean over the sample {mean} cm");
+    eprintln!("mean over the sample {mean:.3} cm");
+    assert!(mean <= 3.0, "mean over the sample {mean} cm");
+}
+
+/// SMPL torso joints and the CMU segment each follows.
+const TORSO_SEGMENTS: [(usize, &str); 8] = [
+    (0, "root"),
+    (3, "upperback"),
+    (6, "thorax"),
+    (9, "thorax"),
+    (12, "upperneck"),
+    (13, "lclavicle"),
+    (14, "rclavicle"),
+    (15, "head"),
+];
+const COLLARS: [usize; 2] = [13, 14];
+
+/// Largest bend (degrees) of a torso joint away from the CMU segments, in the neutral pose and
+/// while walking: pelvis, spine, neck and head lean a few degrees at most, the collars
+/// (shoulder girdle) a bit more. (Fitting the torso to positions freely bent the neck ~80°.)
+fn bend_limit(joint: usize) -> f32 {
+    if COLLARS.contains(&joint) { 16.0 } else { 8.0 }
+}
+
+/// How far each SMPL torso joint bends away from the CMU segments it follows, degrees: the
+/// angle between its local rotation and the relative rotation of its own and its parent's
+/// CMU segments (for the pelvis, between its orientation and the CMU root's).
+fn torso_bends(importer: &SubjectImporter, fk: &CmuBoneTransforms, pose: &SmplPose) -> [(usize, f32); 8] {
+    let global = importer.retargeter().smpl_skeleton().forward_kinematics(pose).rotations;
+    let segment = |j: usize| {
+        let (_, bone) = TORSO_SEGMENTS.iter().find(|(t, _)| *t == j).expect("a torso joint");
+        fk.rotations[importer.cmu_skeleton().bone_index(bone).expect("CMU bone")]
+    };
+    TORSO_SEGMENTS.map(|(j, _)| {
+        let (smpl, cmu) = match PARENTS[j] {
+            p if p < 0 => (global[j], segment(j)),
+            p => {
+                let p = p as usize;
+                (global[p].conjugate() * global[j], segment(p).conjugate() * segment(j))
+            }
+        };
+        (j, smpl.angle_between(cmu).to_degrees())
+    })
 }
 
 #[test]
 fn a_neutral_cmu_posture_gives_a_neutral_smpl_torso_and_the_head_follows_the_real_head() {
     let dir = require_cmu!();
-    for subject in [2, 16, 105] {
+    for subject in [2, 5, 6, 9, 10, 14, 16, 35, 55, 93, 105] {
         let importer = common::subject(&dir, subject);
         let skeleton = importer.cmu_skeleton();
-        let frame = importer.retargeter().retarget(&skeleton.forward_kinematics(&skeleton.rest_pose()));
-        // Pelvis, spine, neck, collars, head: SMPL's own rest shape, no bending to fit CMU's.
-        for j in [0, 3, 6, 9, 12, 13, 14, 15] {
-            let angle = frame.pose.local_rotation(j).angle_between(Quat::IDENTITY).to_degrees();
-            assert!(angle < 1.0, "subject {subject}: joint {j} turned {angle}° in the neutral pose");
+        let fk = skeleton.forward_kinematics(&skeleton.rest_pose());
+        let frame = importer.retargeter().retarget(&fk);
+        // SMPL's own rest shape, leaning a little to absorb the skeletons' different
+        // proportions.
+        for (j, bend) in torso_bends(&importer, &fk, &frame.pose) {
+            assert!(bend < bend_limit(j), "subject {subject}: joint {j} bent {bend}° in the neutral pose");
         }
+        // The head is exactly the CMU head.
+        let head = importer.retargeter().smpl_skeleton().forward_kinematics(&frame.pose).rotations[15];
+        assert!(head.angle_between(Quat::IDENTITY).to_degrees() < 0.1, "subject {subject}");
         // Limbs: only CMU's rest-pose differences (legs splayed ~20°, arms straight out).
         for j in 1..=21 {
             let angle = frame.pose.local_rotation(j).angle_between(Quat::IDENTITY).to_degrees();
@@ -167,22 +215,25 @@ fn a_neutral_cmu_posture_gives_a_neutral_smpl_torso_and_the_head_follows_the_rea
     }
 
     // While walking, the SMPL head has the CMU head segment's orientation (a head-mounted
-    // device follows the subject's real head), and the spine and neck bend modestly.
+    // device follows the subject's real head), and the torso bends only a little away from
+    // the CMU torso.
     let importer = common::subject(&dir, 2);
     let import = import(&importer, &dir, 1, &catalog_entry(&dir, 2, 1));
     let (text, file) = common::amc(&dir, 2, 1);
     let cmu = importer.parse_motion(&text, &file).unwrap();
     let head_bone = importer.cmu_skeleton().bone_index("head").unwrap();
     let smpl_skeleton = importer.retargeter().smpl_skeleton();
+    let mut largest = [0.0f32; NUM_JOINTS];
     for (k, pose) in import.clips[0].poses.iter().enumerate() {
-        let w = importer.cmu_skeleton().forward_kinematics(&cmu[4 * k]).rotations[head_bone];
+        let fk = importer.cmu_skeleton().forward_kinematics(&cmu[4 * k]);
         let head = smpl_skeleton.forward_kinematics(pose).rotations[SmplJoint::Head.index()];
-        assert!(head.angle_between(w).to_degrees() < 0.5, "frame {k}");
-        for j in [3, 6, 9, 12, 15] {
-            let angle = pose.local_rotation(j).angle_between(Quat::IDENTITY).to_degrees();
-            assert!(angle < 30.0, "frame {k}: joint {j} bent {angle}°");
+        assert!(head.angle_between(fk.rotations[head_bone]).to_degrees() < 0.5, "frame {k}");
+        for (j, bend) in torso_bends(&importer, &fk, pose) {
+            largest[j] = largest[j].max(bend);
+            assert!(bend < bend_limit(j), "frame {k}: joint {j} bent {bend}° away from the CMU torso");
         }
     }
+    eprintln!("largest torso bends while walking (°): {:?}", TORSO_SEGMENTS.map(|(j, _)| (j, largest[j])));
 }
 
 #[test]
@@ -207,6 +258,24 @@ fn stored_error_statistics_match_a_recomputation_from_the_library() {
         "recomputed {mean_cm} cm, stored {} cm",
         info.retarget.mean_cm
     );
+}
+
+#[test]
+fn the_parallel_tree_import_is_deterministic() {
+    let dir = require_cmu!();
+    let tree = egoexo_mocap::fs::scan_cmu_tree(&dir).unwrap();
+    let catalog = common::catalog(&dir);
+    let subjects = [2, 16];
+    let run =
+        || egoexo_mocap::fs::import_tree(&tree, &catalog, &ImportOptions::default(), Some(&subjects), &|_| {}).unwrap();
+    let (a, b) = (run(), run());
+    assert!(a.failures.is_empty() && a.trials > 0);
+    assert_eq!(a.library.as_bytes(), b.library.as_bytes(), "two imports give the same library, byte for byte");
+    // Each clip is what a sequential import of its trial gives.
+    let importer = common::subject(&dir, 16);
+    let sequential = import(&importer, &dir, 15, &catalog_entry(&dir, 16, 15));
+    let i = a.library.find("16_15").unwrap();
+    assert_eq!(a.library.motion(i).unwrap().poses, sequential.clips[0].poses);
 }
 
 #[test]

@@ -40,6 +40,9 @@ pub enum BackendPreference {
     WebGpu,
     /// WebGL2 only.
     WebGl2,
+    /// WebGPU without the presentation check (`"webgpu-unchecked"`), for tests and diagnosis:
+    /// where presenting fails, the viewer's lost-device fallback to WebGL2 takes over.
+    WebGpuUnchecked,
 }
 
 impl std::str::FromStr for BackendPreference {
@@ -52,6 +55,7 @@ impl std::str::FromStr for BackendPreference {
             "auto" | "" => Ok(Self::Auto),
             "webgpu" => Ok(Self::WebGpu),
             "webgl2" | "webgl" => Ok(Self::WebGl2),
+            "webgpu-unchecked" => Ok(Self::WebGpuUnchecked),
             _ => Err(ViewerError::BadBackendPreference(s.to_string())),
         }
     }
@@ -85,6 +89,7 @@ mod tests {
         assert_eq!("auto".parse::<BackendPreference>().unwrap(), BackendPreference::Auto);
         assert_eq!(" WebGPU ".parse::<BackendPreference>().unwrap(), BackendPreference::WebGpu);
         assert_eq!("webgl2".parse::<BackendPreference>().unwrap(), BackendPreference::WebGl2);
+        assert_eq!("webgpu-unchecked".parse::<BackendPreference>().unwrap(), BackendPreference::WebGpuUnchecked);
         assert_eq!("".parse::<BackendPreference>().unwrap(), BackendPreference::Auto);
         let err = "vulkan".parse::<BackendPreference>().unwrap_err().to_string();
         assert!(err.contains("\"vulkan\"") && err.contains("\"webgl2\""), "{err}");

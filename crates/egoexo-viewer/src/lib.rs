@@ -55,7 +55,8 @@
 //! that renders off-screen but loses it when presenting, so `auto` lands on WebGL2 there;
 //! without the flag there is no adapter and `auto` lands on WebGL2 too. `webgpu` runs the same
 //! check and throws when it fails; `webgl2` never touches WebGPU. If a WebGPU device is lost
-//! later, the viewer switches to WebGL2 by itself.
+//! later, the viewer switches to WebGL2 by itself (on a fresh canvas in the same place).
+//! `webgpu-unchecked` (tests and diagnosis) skips the check, so that fallback can be seen.
 //!
 //! # Canvas replacement
 //! A canvas keeps the first context type it was given. When the canvas already has another

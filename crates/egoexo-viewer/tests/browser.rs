@@ -334,6 +334,33 @@ async fn forced_webgpu_on_a_canvas_reports_that_it_cannot_present() {
 }
 
 #[wasm_bindgen_test]
+async fn a_webgpu_device_lost_while_drawing_falls_back_to_webgl2_in_place() {
+    // Skip the presentation check: headless Chromium then loses the device when the viewer
+    // presents, and the viewer must switch to WebGL2 on a fresh canvas by itself.
+    let canvas = attached_canvas("lost-canvas");
+    let viewer =
+        Viewer::create(canvas.clone(), "webgpu-unchecked".into()).await.map_err(message).expect("a WebGPU device");
+    assert_eq!(viewer.backend(), "webgpu");
+    let scene = plain_scene();
+    viewer.resize(f64::from(W), f64::from(H), 1.0).map_err(message).unwrap();
+    viewer.set_scene_json(&json(&scene)).map_err(message).unwrap();
+    viewer.seek(FRAME as f64).map_err(message).unwrap();
+    for _ in 0..100 {
+        if viewer.backend() == "webgl2" {
+            break;
+        }
+        sleep_ms(50).await;
+    }
+    assert_eq!(viewer.backend(), "webgl2", "no fallback after the device was lost ({:?})", viewer.failure());
+    let used = viewer.canvas().unwrap();
+    assert!(used != canvas && used.id() == "lost-canvas" && used.parent_node().is_some());
+    assert_eq!((viewer.frame(), viewer.frames()), (FRAME, 30), "the scene and timeline survive the switch");
+    assert_skeleton_drawn(&read_canvas(&viewer), &scene, "after the fallback");
+    assert_eq!(viewer.failure(), None);
+    drop(viewer);
+}
+
+#[wasm_bindgen_test]
 async fn a_canvas_that_held_webgpu_is_replaced_for_webgl2() {
     let canvas = attached_canvas("used-canvas");
     // Give the canvas a WebGPU context first, as a previous viewer would have.

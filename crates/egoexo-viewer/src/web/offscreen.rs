@@ -31,7 +31,7 @@ pub(crate) async fn render_offscreen(
     }
     // WebGL2 adapters come from a canvas surface; keep both alive while rendering.
     let (gpu, _surface): (Gpu, Option<(web_sys::HtmlCanvasElement, wgpu::Surface<'static>)>) = match preference {
-        BackendPreference::WebGpu => (gpu::webgpu().await?, None),
+        BackendPreference::WebGpu | BackendPreference::WebGpuUnchecked => (gpu::webgpu().await?, None),
         BackendPreference::WebGl2 => webgl2_offscreen().await?,
         BackendPreference::Auto => match gpu::webgpu().await {
             Ok(gpu) => (gpu, None),

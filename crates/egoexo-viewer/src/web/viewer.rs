@@ -111,10 +111,12 @@ async fn webgl2_target(canvas: HtmlCanvasElement) -> Result<CanvasTarget, Viewer
     }
 }
 
-/// A WebGPU target on `canvas` after checking that WebGPU can present at all.
-async fn webgpu_target(canvas: HtmlCanvasElement) -> Result<CanvasTarget, ViewerError> {
+/// A WebGPU target on `canvas`, after checking that WebGPU can present at all when `check`.
+async fn webgpu_target(canvas: HtmlCanvasElement, check: bool) -> Result<CanvasTarget, ViewerError> {
     let gpu = gpu::webgpu().await?;
-    gpu::probe_webgpu_presentation(&gpu).await.map_err(ViewerError::WebGpuCannotPresent)?;
+    if check {
+        gpu::probe_webgpu_presentation(&gpu).await.map_err(ViewerError::WebGpuCannotPresent)?;
+    }
     let surface = match gpu::webgpu_surface(&gpu, &canvas) {
         Ok(surface) => (canvas, surface),
         Err(_) => {
@@ -130,9 +132,10 @@ async fn webgpu_target(canvas: HtmlCanvasElement) -> Result<CanvasTarget, Viewer
 /// and falls back to WebGL2, logging why.
 async fn connect(canvas: HtmlCanvasElement, preference: BackendPreference) -> Result<CanvasTarget, ViewerError> {
     match preference {
-        BackendPreference::WebGpu => webgpu_target(canvas).await,
+        BackendPreference::WebGpu => webgpu_target(canvas, true).await,
+        BackendPreference::WebGpuUnchecked => webgpu_target(canvas, false).await,
         BackendPreference::WebGl2 => webgl2_target(canvas).await,
-        BackendPreference::Auto => match webgpu_target(canvas.clone()).await {
+        BackendPreference::Auto => match webgpu_target(canvas.clone(), true).await {
             Ok(target) => Ok(target),
             Err(e) => {
                 web_sys::console::info_1(&format!("egoexo viewer: using WebGL2 ({e})").into());

@@ -29,7 +29,7 @@
 //! viewer.step(n);                    // ±n whole frames, clamped, pauses; returns the frame
 //! viewer.seek(f);                    // rounded, clamped; keeps playing; returns the frame
 //! viewer.frame(); viewer.frames(); viewer.time(); viewer.fps(); viewer.speed();
-//! viewer.on_frame((frame, timeSeconds) => {});   // on every change of the shown frame, and once now
+//! viewer.on_frame((frame, timeSeconds) => {});   // on each change of frame or play state, and once now
 //! viewer.resize(cssWidth, cssHeight, devicePixelRatio);
 //! viewer.reset_camera();             // frame the whole scene (also: double-click)
 //! viewer.render_now();               // draw synchronously (tests read the canvas back after it)

@@ -19,6 +19,9 @@ use crate::mesh::{self, LineVertex};
 /// The most frames a scene may have (about 46 h at 30 fps); bounds the array-size arithmetic.
 pub const MAX_FRAMES: usize = 5_000_000;
 
+/// The highest frame rate a scene may declare, frames per second.
+pub const MAX_FPS: f32 = 1000.0;
+
 /// Joint sphere radius of the reconstructed skeleton, metres.
 pub const JOINT_RADIUS: f32 = 0.028;
 /// Head joint sphere radius, metres.
@@ -59,8 +62,8 @@ pub fn validate_scene(scene: &SceneData) -> Result<(), SceneError> {
         return Err(SceneError::TooManyFrames(scene.frames));
     }
     let mut problems: Vec<String> = scene.check().err().into_iter().collect();
-    if !(scene.fps.is_finite() && scene.fps > 0.0) {
-        problems.push(format!("fps is {}, expected a positive number", scene.fps));
+    if !(scene.fps.is_finite() && scene.fps > 0.0 && scene.fps <= MAX_FPS) {
+        problems.push(format!("fps is {}, expected a rate in (0, {MAX_FPS}] frames per second", scene.fps));
     }
     for (child, &parent) in scene.parents.iter().enumerate() {
         if parent != -1 && !(parent >= 0 && (parent as usize) < child) {
@@ -288,7 +291,7 @@ pub fn build_frame(scene: &SceneData, frame: usize, layers: LayerToggles) -> Fra
             list.sphere(p, if device.name == "head" { 0.03 } else { 0.022 }, colour);
         }
         let first = frame.saturating_sub(back);
-        let last = (frame + ahead).min(scene.frames - 1);
+        let last = frame.saturating_add(ahead).min(scene.frames - 1);
         for f in first..last {
             if let (Some(a), Some(b)) = (at(f), at(f + 1)) {
                 let c = if f < frame { colour } else { colors::with_alpha(colour, 0.35) };
@@ -381,6 +384,11 @@ mod tests {
         assert!(msg.contains("joints has 10 values, expected 288"), "{msg}");
         assert!(msg.contains("fps is 0"), "{msg}");
         assert!(msg.contains("parents[3] = 7"), "{msg}");
+        let mut fast = example_scene(2);
+        fast.fps = 1e30;
+        assert!(validate_scene(&fast).unwrap_err().to_string().contains("fps is 1000000000000000000000000000000"));
+        // Drawing never overflows, even for scenes that skip validation.
+        assert!(!build_frame(&fast, 1, ALL_LAYERS).is_empty());
         let mut huge = example_scene(1);
         huge.frames = usize::MAX;
         assert!(matches!(validate_scene(&huge), Err(SceneError::TooManyFrames(_))));

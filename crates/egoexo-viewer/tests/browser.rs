@@ -418,23 +418,26 @@ async fn keys_playback_and_on_frame_drive_the_timeline() {
     key("Home", false);
     assert_eq!(viewer.frame(), 0);
     assert!(!viewer.is_playing());
+    let calls = seen.borrow().len();
     key(" ", false);
     assert!(viewer.is_playing());
     key(" ", false);
     assert!(!viewer.is_playing());
+    assert_eq!(seen.borrow().len(), calls + 2, "play/pause is reported so a play button can follow");
 
     // Playback advances on animation frames at the chosen speed.
     viewer.set_speed(4.0).map_err(message).unwrap();
     viewer.play().map_err(message).unwrap();
     let before = seen.borrow().len();
     sleep_ms(400).await;
-    viewer.pause().map_err(message).unwrap();
+    let during: Vec<f64> = seen.borrow()[before..].iter().map(|(frame, _)| *frame).collect();
     let frame = viewer.frame();
+    viewer.pause().map_err(message).unwrap();
     assert!(frame > 10, "4× playback for 0.4 s moved only to frame {frame}");
-    let calls = seen.borrow().len() - before;
-    web_sys::console::log_1(&format!("0.4 s of 4× playback: frame {frame}, {calls} on_frame calls").into());
-    assert!(calls >= 1, "on_frame follows playback");
-    assert_eq!(seen.borrow().last().unwrap().0, frame as f64);
+    web_sys::console::log_1(&format!("0.4 s of 4× playback: frame {frame}, on_frame saw {during:?}").into());
+    assert!(!during.is_empty() && during.iter().all(|&f| f > 0.0), "on_frame follows playback: {during:?}");
+    assert_eq!(during.last(), Some(&(frame as f64)));
+    assert_eq!(seen.borrow().last().unwrap().0, frame as f64, "pausing reports the frame it stopped on");
 
     // Bad requests throw clear errors and change nothing.
     assert!(message(viewer.set_speed(f64::NAN).unwrap_err()).contains("speed"));

@@ -209,10 +209,11 @@ struct State {
     css_size: (f32, f32),
     device_pixel_ratio: f32,
     dirty: bool,
+    /// Timestamp of the last animation frame that found playback running, ms.
     last_tick_ms: Option<f64>,
     on_frame: Option<js_sys::Function>,
-    /// The frame (and scene generation) last reported to `on_frame`.
-    notified: Option<(usize, u64)>,
+    /// The frame, scene generation and playing state last reported to `on_frame`.
+    notified: Option<(usize, u64, bool)>,
     scene_generation: u64,
     drag: Option<Drag>,
     recovering: bool,
@@ -283,12 +284,12 @@ impl Drop for Viewer {
     }
 }
 
-/// Calls `on_frame` when the shown frame changed since the last call; never while the state is
-/// borrowed (the callback may call back into the viewer).
+/// Calls `on_frame` when the shown frame (or the playing state) changed since the last call;
+/// never while the state is borrowed (the callback may call back into the viewer).
 fn notify_frame(state: &Rc<RefCell<State>>) {
     let call = {
         let Ok(mut s) = state.try_borrow_mut() else { return };
-        let now = (s.playback.frame(), s.scene_generation);
+        let now = (s.playback.frame(), s.scene_generation, s.playback.is_playing());
         if s.notified == Some(now) {
             return;
         }
@@ -307,8 +308,14 @@ fn tick(weak: &Weak<RefCell<State>>, now_ms: f64) {
     let Some(state) = weak.upgrade() else { return };
     let recover = {
         let Ok(mut s) = state.try_borrow_mut() else { return };
-        let dt_s = s.last_tick_ms.map_or(0.0, |last| (now_ms - last) / 1000.0);
-        s.last_tick_ms = Some(now_ms);
+        // Time only counts between two ticks that both found playback running: the first tick
+        // after `play` does not catch up on the time spent paused.
+        let playing = s.playback.is_playing();
+        let dt_s = match (playing, s.last_tick_ms) {
+            (true, Some(last)) => (now_ms - last) / 1000.0,
+            _ => 0.0,
+        };
+        s.last_tick_ms = playing.then_some(now_ms);
         if s.playback.advance(dt_s) {
             s.dirty = true;
         }
@@ -780,7 +787,8 @@ impl Viewer {
     }
 
     /// Registers `callback(frame, timeSeconds)`, called whenever the shown frame changes (by
-    /// playback, keys, `step`, `seek`, a new scene) and once right away. Replaces any previous
+    /// playback, keys, `step`, `seek`, a new scene), whenever playback starts or stops (so a
+    /// play button can follow the Space key), and once right away. Replaces any previous
     /// callback.
     pub fn on_frame(&self, callback: js_sys::Function) -> Result<(), JsError> {
         self.update(|s| {

@@ -1,0 +1,317 @@
+//! [`SessionWorker`]: the worker's state and operations in plain Rust — load the models,
+//! import a session, reconstruct it (ego-exo plus the ego-only overlay), build the viewer's
+//! scene, export the motion. The wasm-bindgen layer ([`crate::bindings`]) only converts
+//! JS values; everything that can fail is here and returns [`WorkerError`].
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use egoexo_core::camera::Projection;
+use egoexo_core::metrics::MetricsAccumulator;
+use egoexo_infer::manifest::Manifest;
+use egoexo_infer::models::ModelSet;
+use egoexo_infer::{Engine, InferError, Method, Progress, ReconstructOptions, Reconstruction, Stage};
+use egoexo_session::align::DEFAULT_FPS;
+use egoexo_session::export::{self, ExportError, Format};
+use egoexo_session::{
+    AlignError, AlignOptions, AlignedSession, FileTree, ImportError, ImportOptions, Imported, Limits, align,
+    import_session,
+};
+use thiserror::Error;
+
+use crate::summary::{
+    Accuracy, JobProgress, JobStage, ModelFileRef, ModelSetSummary, ModelsSummary, ObserverSummary,
+    ReconstructionSummary, SessionSummary,
+};
+
+/// Everything that can go wrong in the worker. Library errors keep their exact messages
+/// (the importer's name the file, line/field and what was expected).
+#[derive(Debug, Error)]
+pub enum WorkerError {
+    #[error(transparent)]
+    Import(#[from] ImportError),
+    #[error("{session}: {source}")]
+    Align { session: String, source: AlignError },
+    #[error(transparent)]
+    Infer(#[from] InferError),
+    #[error(transparent)]
+    Export(#[from] ExportError),
+    #[error("the models are not loaded yet")]
+    NoModels,
+    #[error("no session is open: import one first")]
+    NoSession,
+    #[error("nothing is reconstructed yet: reconstruct the session first")]
+    NoReconstruction,
+    #[error("cannot build the scene: {0}")]
+    Scene(String),
+}
+
+/// An imported session, aligned on the timeline the models run at.
+#[derive(Debug)]
+struct OpenSession {
+    imported: Imported,
+    aligned: AlignedSession,
+}
+
+/// The reconstructions of the open session.
+#[derive(Debug)]
+struct Results {
+    ego_exo: Reconstruction,
+    ego_only: Option<Reconstruction>,
+    summary: ReconstructionSummary,
+}
+
+/// A file made by [`SessionWorker::export`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ExportedFile {
+    pub bytes: Vec<u8>,
+    /// `<session>-<method>.<extension>`.
+    pub file_name: String,
+    pub mime_type: &'static str,
+}
+
+/// The worker: models, the open session and its reconstructions.
+#[derive(Debug, Default)]
+pub struct SessionWorker {
+    engine: Option<Engine>,
+    manifest: Option<Manifest>,
+    session: Option<OpenSession>,
+    results: Option<Results>,
+}
+
+impl SessionWorker {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The files a manifest lists (paths relative to the models folder), for the caller to
+    /// fetch before [`SessionWorker::load_models`].
+    pub fn model_files(manifest_json: &[u8]) -> Result<Vec<ModelFileRef>, WorkerError> {
+        let manifest = Manifest::from_json(manifest_json)?;
+        Ok(manifest
+            .model_sets
+            .iter()
+            .flat_map(|set| [&set.egonet, &set.gate, &set.fusion])
+            .map(|f| ModelFileRef { file: f.file.clone(), sha256: f.sha256.clone(), bytes: f.bytes })
+            .collect())
+    }
+
+    /// Loads every model set of the manifest, reading each file through `read` (path relative
+    /// to the models folder → bytes); each file's sha256 is checked against the manifest.
+    pub fn load_models(
+        &mut self,
+        manifest_json: &[u8],
+        mut read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
+    ) -> Result<ModelsSummary, WorkerError> {
+        let manifest = Manifest::from_json(manifest_json)?;
+        let mut engine = Engine::new();
+        let mut sets = Vec::new();
+        for set in &manifest.model_sets {
+            engine = engine.with_models(ModelSet::load(set, &mut read)?);
+            sets.push(ModelSetSummary {
+                tracking_points: set.tracking.points(),
+                max_observers: set.max_observers,
+                hidden_dim: set.hidden_dim,
+            });
+        }
+        let bytes = Self::model_files(manifest_json)?.iter().map(|f| f.bytes).sum();
+        self.engine = Some(engine);
+        self.manifest = Some(manifest);
+        Ok(ModelsSummary { model_sets: sets, bytes })
+    }
+
+    /// Whether models are loaded.
+    pub fn has_models(&self) -> bool {
+        self.engine.is_some()
+    }
+
+    /// Imports a zip archive (`.egoexo` or a zipped Aria MPS / Nymeria folder) from its bytes.
+    pub fn import_archive(&mut self, name: &str, bytes: Vec<u8>) -> Result<SessionSummary, WorkerError> {
+        let tree = FileTree::from_zip(name, Arc::<[u8]>::from(bytes), Limits::default())?;
+        self.import(&tree)
+    }
+
+    /// Imports a dropped folder: `(relative path, bytes)` per file, paths `/`-separated.
+    pub fn import_files(
+        &mut self,
+        name: &str,
+        files: impl IntoIterator<Item = (String, Vec<u8>)>,
+    ) -> Result<SessionSummary, WorkerError> {
+        let tree = FileTree::from_files(name, files, Limits::default())?;
+        self.import(&tree)
+    }
+
+    /// Imports any supported input and aligns it; replaces the open session.
+    pub fn import(&mut self, tree: &FileTree) -> Result<SessionSummary, WorkerError> {
+        self.session = None;
+        self.results = None;
+        let imported = import_session(tree, &ImportOptions::default())?;
+        let aligned = align_for(&imported, self.fps())?;
+        let summary = session_summary(&imported, &aligned);
+        self.session = Some(OpenSession { imported, aligned });
+        Ok(summary)
+    }
+
+    /// The frame rate the models were trained at (the default timeline rate without models).
+    fn fps(&self) -> f32 {
+        self.manifest.as_ref().map_or(DEFAULT_FPS, |m| m.fps)
+    }
+
+    /// Reconstructs the open session with the full method and, if `ego_only_overlay`, again
+    /// ego-only for the comparison overlay. `progress` is called after every window of every
+    /// pass; returning `false` cancels ([`InferError::Cancelled`]).
+    pub fn reconstruct(
+        &mut self,
+        ego_only_overlay: bool,
+        progress: &mut dyn FnMut(JobProgress) -> bool,
+    ) -> Result<ReconstructionSummary, WorkerError> {
+        let engine = self.engine.as_ref().ok_or(WorkerError::NoModels)?;
+        let fps = self.fps();
+        let open = self.session.as_mut().ok_or(WorkerError::NoSession)?;
+        if open.aligned.timeline.fps != fps {
+            open.aligned = align_for(&open.imported, fps)?;
+        }
+        self.results = None;
+        let aligned = &open.aligned;
+        let passes = if ego_only_overlay { 2 } else { 1 };
+        let run = |method: Method, pass: usize, progress: &mut dyn FnMut(JobProgress) -> bool| {
+            let options = ReconstructOptions { method, ..ReconstructOptions::default() };
+            engine.reconstruct(aligned, &options, &mut |p: Progress| {
+                // Each pass has an ego and a fusion stage over the same windows.
+                let per_pass = 2 * p.total;
+                let done_in_pass = match p.stage {
+                    Stage::Ego => p.done,
+                    Stage::Fusion => p.total + p.done,
+                };
+                let stage = match (pass, p.stage) {
+                    (1.., _) => JobStage::EgoOnlyOverlay,
+                    (0, Stage::Ego) => JobStage::EgoPass,
+                    (0, Stage::Fusion) => JobStage::Fusion,
+                };
+                progress(JobProgress { stage, done: pass * per_pass + done_in_pass, total: passes * per_pass })
+            })
+        };
+        let ego_exo = run(Method::EgoExo, 0, progress)?;
+        let ego_only = if ego_only_overlay { Some(run(Method::EgoOnly, 1, progress)?) } else { None };
+        let summary = reconstruction_summary(aligned, &ego_exo, ego_only.as_ref());
+        self.results = Some(Results { ego_exo, ego_only, summary: summary.clone() });
+        Ok(summary)
+    }
+
+    /// The last reconstruction (the full method), if any.
+    pub fn reconstruction(&self) -> Option<&Reconstruction> {
+        self.results.as_ref().map(|r| &r.ego_exo)
+    }
+
+    /// The ego-only reconstruction of the overlay, if any.
+    pub fn ego_only_reconstruction(&self) -> Option<&Reconstruction> {
+        self.results.as_ref().and_then(|r| r.ego_only.as_ref())
+    }
+
+    /// The summary of the last reconstruction.
+    pub fn reconstruction_summary(&self) -> Option<&ReconstructionSummary> {
+        self.results.as_ref().map(|r| &r.summary)
+    }
+
+    /// The viewer's scene of the last reconstruction ([`egoexo_scene::SceneData`]) as JSON.
+    pub fn scene_json(&self) -> Result<Vec<u8>, WorkerError> {
+        let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
+        let results = self.results.as_ref().ok_or(WorkerError::NoReconstruction)?;
+        let scene = egoexo_infer::scene::build_scene(&open.aligned, &results.ego_exo, results.ego_only.as_ref());
+        scene.check().map_err(WorkerError::Scene)?;
+        serde_json::to_vec(&scene).map_err(|e| WorkerError::Scene(e.to_string()))
+    }
+
+    /// Writes the reconstructed motion (the full method) in `format`.
+    pub fn export(&self, format: Format) -> Result<ExportedFile, WorkerError> {
+        let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
+        let results = self.results.as_ref().ok_or(WorkerError::NoReconstruction)?;
+        let bytes = export::write(format, &results.ego_exo.motion)?;
+        Ok(ExportedFile {
+            bytes,
+            file_name: format!("{}-{}.{}", open.aligned.name, results.ego_exo.method.name(), format.extension()),
+            mime_type: format.mime_type(),
+        })
+    }
+}
+
+fn align_for(imported: &Imported, fps: f32) -> Result<AlignedSession, WorkerError> {
+    align(&imported.session, &AlignOptions { fps, ..AlignOptions::default() })
+        .map_err(|source| WorkerError::Align { session: imported.session.name.clone(), source })
+}
+
+fn projection_name(projection: &Projection) -> &'static str {
+    match projection {
+        Projection::Pinhole(_) => "pinhole",
+        Projection::Fisheye624(_) => "fisheye624",
+    }
+}
+
+fn session_summary(imported: &Imported, aligned: &AlignedSession) -> SessionSummary {
+    let session = &imported.session;
+    let mut devices = vec!["head".to_string()];
+    devices.extend(session.wearer.left_wrist.as_ref().map(|_| "left_wrist".to_string()));
+    devices.extend(session.wearer.right_wrist.as_ref().map(|_| "right_wrist".to_string()));
+    let observers = session
+        .observers
+        .iter()
+        .zip(&aligned.observers)
+        .map(|(o, a)| ObserverSummary {
+            id: o.id.clone(),
+            camera: format!("{} {}×{}", projection_name(&o.camera.projection), o.camera.width, o.camera.height),
+            keypoint_frames: a.keypoints.iter().filter(|f| f.iter().any(Option::is_some)).count(),
+        })
+        .collect();
+    let mut warnings: Vec<String> = imported.warnings.iter().map(ToString::to_string).collect();
+    for o in &session.observers {
+        if o.keypoints.is_none() {
+            warnings.push(format!("observer `{}` has no 2D keypoints: it is shown but cannot contribute rays", o.id));
+        }
+    }
+    let timeline = &aligned.timeline;
+    SessionSummary {
+        name: aligned.name.clone(),
+        source: imported.source.describe().to_string(),
+        frames: timeline.frames,
+        fps: timeline.fps,
+        duration_s: timeline.frames as f32 / timeline.fps,
+        devices,
+        tracking_points: if session.wearer.has_wrists() { 3 } else { 1 },
+        observers,
+        ground_truth: aligned.ground_truth.is_some(),
+        warnings,
+    }
+}
+
+fn reconstruction_summary(
+    aligned: &AlignedSession,
+    ego_exo: &Reconstruction,
+    ego_only: Option<&Reconstruction>,
+) -> ReconstructionSummary {
+    let accuracy = aligned.ground_truth.as_ref().and_then(|gt| {
+        let truth: Vec<_> = gt.poses.iter().map(|p| aligned.skeleton.forward_kinematics(p).positions).collect();
+        let mpjpe = |r: &Reconstruction| -> Option<f64> {
+            let frames = r.joints.len().min(truth.len());
+            let selected: Vec<bool> = (0..frames).map(|f| r.valid[f] && gt.valid[f]).collect();
+            let mut acc = MetricsAccumulator::new();
+            acc.add_segment(&r.joints[..frames], &truth[..frames], aligned.timeline.fps, Some(&selected)).ok()?;
+            acc.finish().map(|m| m.mpjpe_cm)
+        };
+        let frames = gt.valid.iter().zip(&ego_exo.valid).filter(|(g, v)| **g && **v).count();
+        Some(Accuracy { frames, ego_exo_mpjpe_cm: mpjpe(ego_exo)?, ego_only_mpjpe_cm: ego_only.and_then(mpjpe) })
+    });
+    let mut observers_used: BTreeMap<&str, usize> = BTreeMap::new();
+    for g in &ego_exo.gates {
+        let used = g.gates.iter().filter(|f| f.iter().any(|&v| v > 0.0)).count();
+        observers_used.insert(&g.observer_id, used);
+    }
+    ReconstructionSummary {
+        method: ego_exo.method.name().to_string(),
+        tracking_points: ego_exo.tracking.points(),
+        frames: ego_exo.joints.len(),
+        valid_frames: ego_exo.valid.iter().filter(|&&v| v).count(),
+        exo_evidence_frames: ego_exo.exo_evidence.iter().filter(|&&v| v).count(),
+        observer_ray_frames: observers_used.into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
+        accuracy,
+    }
+}

@@ -1,0 +1,292 @@
+//! The worker natively: the fixture session through import → reconstruct → scene → export with
+//! the fixture networks, errors, cancel. `reconstruction_matches_the_recording` also keeps
+//! `tests/fixtures/expected_reconstruction.json`, which the browser test
+//! (`tests/worker_wasm.rs`) compares the wasm build against; after an intended change of the
+//! engine's output, rewrite it with `EGOEXO_BLESS=1 cargo test -p egoexo-web-worker --test native`.
+#![cfg(not(target_arch = "wasm32"))]
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::io::{Cursor, Read};
+
+use common::*;
+use egoexo_infer::InferError;
+use egoexo_scene::SceneData;
+use egoexo_session::export::Format;
+use egoexo_session::{FileTree, ImportError, Limits};
+use egoexo_web_worker::summary::{JobProgress, JobStage};
+use egoexo_web_worker::{SessionWorker, WorkerError};
+
+fn read_fixture_model(file: &str) -> Result<Vec<u8>, InferError> {
+    model_file(file)
+        .map(<[u8]>::to_vec)
+        .ok_or_else(|| InferError::ReadModel { file: file.into(), message: "not a fixture file".into() })
+}
+
+fn worker_with_models() -> SessionWorker {
+    let mut worker = SessionWorker::new();
+    let summary = worker.load_models(MANIFEST, read_fixture_model).unwrap();
+    assert_eq!(summary.model_sets.iter().map(|s| s.tracking_points).collect::<Vec<_>>(), [1, 3]);
+    assert_eq!(summary.bytes, MODEL_FILES.iter().map(|(_, b)| b.len() as u64).sum::<u64>());
+    worker
+}
+
+fn reconstructed() -> (SessionWorker, Vec<JobProgress>) {
+    let mut worker = worker_with_models();
+    worker.import_archive(SESSION_NAME, SESSION.to_vec()).unwrap();
+    let mut reports = Vec::new();
+    worker
+        .reconstruct(true, &mut |p| {
+            reports.push(p);
+            true
+        })
+        .unwrap();
+    (worker, reports)
+}
+
+fn flat(joints: &[[egoexo_core::glam::Vec3; 24]]) -> Vec<f32> {
+    joints.iter().flat_map(|f| f.iter().flat_map(|p| p.to_array())).collect()
+}
+
+#[test]
+fn model_files_lists_every_network_with_its_checksum() {
+    let files = SessionWorker::model_files(MANIFEST).unwrap();
+    let names: Vec<&str> = files.iter().map(|f| f.file.as_str()).collect();
+    assert_eq!(names, MODEL_FILES.iter().map(|(n, _)| *n).collect::<Vec<_>>());
+    for f in &files {
+        assert_eq!(f.sha256, egoexo_infer::manifest::sha256_hex(model_file(&f.file).unwrap()));
+        assert_eq!(f.bytes, model_file(&f.file).unwrap().len() as u64);
+    }
+}
+
+#[test]
+fn import_summarises_the_session() {
+    let mut worker = SessionWorker::new();
+    let s = worker.import_archive(SESSION_NAME, SESSION.to_vec()).unwrap();
+    assert_eq!(s.name, "105_36");
+    assert_eq!(s.source, ".egoexo session");
+    assert_eq!(s.fps, 30.0);
+    assert!(s.frames > 200 && s.frames < 240, "{}", s.frames);
+    assert!((s.duration_s - s.frames as f32 / 30.0).abs() < 1e-4);
+    assert_eq!(s.devices, ["head", "left_wrist", "right_wrist"]);
+    assert_eq!(s.tracking_points, 3);
+    assert_eq!(s.observers.iter().map(|o| o.id.as_str()).collect::<Vec<_>>(), ["observer-1", "observer-2"]);
+    assert!(s.observers.iter().all(|o| o.camera.starts_with("fisheye624 ") && o.keypoint_frames > 0));
+    assert!(s.ground_truth);
+    // The simulator's detector puts a keypoint just off the image once; the import says so.
+    assert!(s.warnings.iter().all(|w| w.starts_with("105_36: observer `observer-")), "{:?}", s.warnings);
+}
+
+/// The same session dropped as a folder (its files, `/`-separated paths under one root
+/// folder, as `webkitdirectory` gives them) imports to the same summary.
+#[test]
+fn a_dropped_folder_imports_like_the_archive() {
+    let mut archive = zip::ZipArchive::new(Cursor::new(SESSION)).unwrap();
+    let mut files = Vec::new();
+    for i in 0..archive.len() {
+        let mut entry = archive.by_index(i).unwrap();
+        if entry.is_dir() {
+            continue;
+        }
+        let mut bytes = Vec::new();
+        entry.read_to_end(&mut bytes).unwrap();
+        files.push((format!("105_36/{}", entry.name().unwrap()), bytes));
+    }
+    let mut worker = SessionWorker::new();
+    let from_folder = worker.import_files("105_36", files).unwrap();
+    let from_archive = SessionWorker::new().import_archive(SESSION_NAME, SESSION.to_vec()).unwrap();
+    assert_eq!(from_folder, from_archive);
+}
+
+#[test]
+fn reconstruction_matches_the_recording() {
+    let (worker, _) = reconstructed();
+    let ego_exo = worker.reconstruction().unwrap();
+    let ego_only = worker.ego_only_reconstruction().unwrap();
+    let frames = ego_exo.joints.len();
+    let samples = sample_frames(frames);
+    let actual = Expected {
+        session: SESSION_NAME.into(),
+        frames,
+        valid_frames: ego_exo.valid.iter().filter(|&&v| v).count(),
+        sample_frames: samples.clone(),
+        ego_exo: sample(&flat(&ego_exo.joints), &samples),
+        ego_only: sample(&flat(&ego_only.joints), &samples),
+    };
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/expected_reconstruction.json");
+    if std::env::var_os("EGOEXO_BLESS").is_some() {
+        std::fs::write(&path, serde_json::to_string(&actual).unwrap() + "\n").unwrap();
+        return;
+    }
+    let expected: Expected = serde_json::from_str(EXPECTED_JSON).unwrap();
+    let hint = "the engine's output changed; if intended, rewrite the recording with \
+                `EGOEXO_BLESS=1 cargo test -p egoexo-web-worker --test native`";
+    assert_eq!((actual.frames, actual.valid_frames), (expected.frames, expected.valid_frames), "{hint}");
+    assert_eq!(actual.sample_frames, expected.sample_frames, "{hint}");
+    // Natively the numbers reproduce to float rounding.
+    for (what, a, e) in
+        [("ego-exo", &actual.ego_exo, &expected.ego_exo), ("ego-only", &actual.ego_only, &expected.ego_only)]
+    {
+        let (d, i, j) = max_difference(a, e);
+        assert!(d <= 1e-5, "{what}: joint {j} of frame {} is {d} m off; {hint}", expected.sample_frames[i]);
+    }
+    // The overlay really is another reconstruction.
+    assert!(max_difference(&actual.ego_exo, &actual.ego_only).0 > 1e-3);
+}
+
+#[test]
+fn progress_covers_every_window_of_both_passes_in_order() {
+    let (worker, reports) = reconstructed();
+    let total = reports[0].total;
+    assert!(reports.iter().all(|p| p.total == total));
+    assert_eq!(reports.iter().map(|p| p.done).collect::<Vec<_>>(), (1..=total).collect::<Vec<_>>());
+    // Four equal parts: ego pass, fusion, then the overlay's two stages.
+    assert_eq!(total % 4, 0);
+    let windows = total / 4;
+    assert!(windows >= 3, "{windows} windows");
+    let stages: Vec<JobStage> = reports.iter().map(|p| p.stage).collect();
+    assert!(stages[..windows].iter().all(|&s| s == JobStage::EgoPass));
+    assert!(stages[windows..2 * windows].iter().all(|&s| s == JobStage::Fusion));
+    assert!(stages[2 * windows..].iter().all(|&s| s == JobStage::EgoOnlyOverlay));
+    let summary = worker.reconstruction_summary().unwrap();
+    assert_eq!(summary.method, "ego-exo");
+    assert_eq!(summary.tracking_points, 3);
+    assert_eq!(summary.valid_frames, summary.frames);
+    let accuracy = summary.accuracy.as_ref().unwrap();
+    assert_eq!(accuracy.frames, summary.frames);
+    assert!(accuracy.ego_exo_mpjpe_cm.is_finite() && accuracy.ego_exo_mpjpe_cm > 0.0);
+    assert!(accuracy.ego_only_mpjpe_cm.is_some_and(f64::is_finite));
+    assert_eq!(summary.observer_ray_frames.keys().collect::<Vec<_>>(), ["observer-1", "observer-2"]);
+}
+
+#[test]
+fn without_the_overlay_only_one_pass_runs() {
+    let mut worker = worker_with_models();
+    worker.import_archive(SESSION_NAME, SESSION.to_vec()).unwrap();
+    let mut last = None;
+    worker
+        .reconstruct(false, &mut |p| {
+            last = Some(p);
+            true
+        })
+        .unwrap();
+    let last = last.unwrap();
+    assert_eq!(last.done, last.total);
+    assert_eq!(last.stage, JobStage::Fusion);
+    assert!(worker.ego_only_reconstruction().is_none());
+    let scene: SceneData = serde_json::from_slice(&worker.scene_json().unwrap()).unwrap();
+    assert!(scene.ego_only_joints.is_none());
+}
+
+#[test]
+fn the_scene_holds_everything_the_viewer_draws() {
+    let (worker, _) = reconstructed();
+    let scene: SceneData = serde_json::from_slice(&worker.scene_json().unwrap()).unwrap();
+    scene.check().unwrap();
+    let r = worker.reconstruction().unwrap();
+    assert_eq!(scene.frames, r.joints.len());
+    assert_eq!(scene.method, "ego-exo");
+    assert_eq!(scene.joints, flat(&r.joints));
+    assert_eq!(scene.ego_only_joints.as_deref(), Some(&flat(&worker.ego_only_reconstruction().unwrap().joints)[..]));
+    assert!(scene.ground_truth_joints.is_some());
+    assert_eq!(scene.devices.len(), 3);
+    assert_eq!(scene.observers.len(), 2);
+    assert!(scene.observers.iter().any(|o| o.rays.chunks(4).any(|r| r[3] > 0.0)), "some ray has a gate");
+}
+
+#[test]
+fn cancelling_stops_the_job_and_keeps_no_result() {
+    let mut worker = worker_with_models();
+    worker.import_archive(SESSION_NAME, SESSION.to_vec()).unwrap();
+    let mut calls = 0;
+    let err = worker
+        .reconstruct(true, &mut |_| {
+            calls += 1;
+            calls < 3
+        })
+        .unwrap_err();
+    assert!(matches!(err, WorkerError::Infer(InferError::Cancelled)), "{err}");
+    assert_eq!(calls, 3);
+    assert!(worker.reconstruction().is_none());
+    assert!(matches!(worker.scene_json(), Err(WorkerError::NoReconstruction)));
+    // The session is still open: a new run works.
+    worker.reconstruct(false, &mut |_| true).unwrap();
+}
+
+#[test]
+fn exports_every_format_of_the_reconstruction() {
+    let (worker, _) = reconstructed();
+    let motion = &worker.reconstruction().unwrap().motion;
+    for format in Format::ALL {
+        let file = worker.export(format).unwrap();
+        assert_eq!(file.file_name, format!("105_36-ego-exo.{}", format.extension()));
+        assert_eq!(file.mime_type, format.mime_type());
+        assert_eq!(file.bytes, egoexo_session::export::write(format, motion).unwrap(), "{format}");
+    }
+}
+
+#[test]
+fn a_malformed_file_is_the_importers_error_verbatim() {
+    let garbage = b"this is not a zip archive".to_vec();
+    let expected: ImportError = FileTree::from_zip("broken.egoexo", garbage.clone(), Limits::default()).unwrap_err();
+    let mut worker = worker_with_models();
+    let err = worker.import_archive("broken.egoexo", garbage).unwrap_err();
+    assert_eq!(err.to_string(), expected.to_string());
+    assert!(err.to_string().starts_with("broken.egoexo"), "{err}");
+
+    // A folder that is no known layout names what it found.
+    let err = worker.import_files("notes", [("notes/readme.txt".to_string(), b"hi".to_vec())]).unwrap_err();
+    assert!(err.to_string().contains("readme.txt"), "{err}");
+
+    // A session file with a broken field names the file and the field.
+    let mut archive = zip::ZipArchive::new(Cursor::new(SESSION)).unwrap();
+    let mut files = BTreeMap::new();
+    for i in 0..archive.len() {
+        let mut entry = archive.by_index(i).unwrap();
+        let mut bytes = Vec::new();
+        entry.read_to_end(&mut bytes).unwrap();
+        files.insert(entry.name().unwrap().to_string(), bytes);
+    }
+    let manifest = String::from_utf8(files["session.json"].clone()).unwrap();
+    files.insert("session.json".into(), manifest.replacen("\"observers\"", "\"observerz\"", 1).into_bytes());
+    let err = worker.import_files("bad", files.clone()).unwrap_err();
+    let direct = egoexo_session::import_session(
+        &FileTree::from_files("bad", files, Limits::default()).unwrap(),
+        &Default::default(),
+    )
+    .unwrap_err();
+    assert_eq!(err.to_string(), direct.to_string());
+    assert!(err.to_string().contains("session.json"), "{err}");
+    // A failed import closes the previous session rather than leaving stale state.
+    assert!(matches!(worker.reconstruct(false, &mut |_| true), Err(WorkerError::NoSession)));
+}
+
+#[test]
+fn operations_out_of_order_say_what_is_missing() {
+    let mut worker = SessionWorker::new();
+    assert!(matches!(worker.reconstruct(true, &mut |_| true), Err(WorkerError::NoModels)));
+    let mut worker = worker_with_models();
+    assert!(matches!(worker.reconstruct(true, &mut |_| true), Err(WorkerError::NoSession)));
+    worker.import_archive(SESSION_NAME, SESSION.to_vec()).unwrap();
+    assert!(matches!(worker.export(Format::Bvh), Err(WorkerError::NoReconstruction)));
+}
+
+#[test]
+fn a_model_file_that_does_not_match_the_manifest_is_refused() {
+    let mut worker = SessionWorker::new();
+    let err = worker
+        .load_models(MANIFEST, |file| {
+            let mut bytes = read_fixture_model(file)?;
+            if file == "3pt/gate.onnx" {
+                bytes[100] ^= 1;
+            }
+            Ok(bytes)
+        })
+        .unwrap_err();
+    let message = err.to_string();
+    assert!(message.contains("3pt/gate.onnx") && message.contains("sha256"), "{message}");
+    assert!(!worker.has_models());
+    let err = SessionWorker::new().load_models(b"{\"format_version\": 99}", read_fixture_model).unwrap_err();
+    assert!(err.to_string().contains("manifest.json"), "{err}");
+}

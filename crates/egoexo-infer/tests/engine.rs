@@ -1,3 +1,4 @@
+#![cfg(not(target_arch = "wasm32"))]
 //! The engine end to end on simulated sessions, for every method, with the (untrained)
 //! fixture networks: the invariants a reconstruction must keep whatever the weights.
 

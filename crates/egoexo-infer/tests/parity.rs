@@ -1,3 +1,4 @@
+#![cfg(not(target_arch = "wasm32"))]
 //! tract runs the exported networks like PyTorch and onnxruntime did: the fixture stores
 //! seeded inputs with both frameworks' outputs (written by `egoexo_train.export`).
 

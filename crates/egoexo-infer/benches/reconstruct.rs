@@ -1,0 +1,62 @@
+//! Reconstruction throughput, native: frames per second of the engine on simulated 20 s
+//! sessions with 1 and 3 observers (3-point tracking), with the shipped models (`models/`),
+//! against ego-only on the same session as the in-run reference. Run with
+//! `cargo bench -p egoexo-infer`; criterion reports medians, and the throughput lines give
+//! frames per second.
+
+use std::path::{Path, PathBuf};
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use egoexo_core::TrackingMode;
+use egoexo_infer::manifest::Manifest;
+use egoexo_infer::models::ModelSet;
+use egoexo_infer::{Engine, InferError, Method, ReconstructOptions};
+use egoexo_session::align::{AlignOptions, AlignedSession, align};
+use egoexo_synth::procedural::walking_circle;
+use egoexo_synth::{SynthConfig, simulate};
+
+fn models_dir() -> PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let shipped = root.join("models");
+    if shipped.join("manifest.json").exists() {
+        shipped
+    } else {
+        eprintln!("models/ has no manifest.json: benchmarking the untrained fixture networks instead");
+        root.join("crates/egoexo-infer/tests/fixtures/models")
+    }
+}
+
+fn engine() -> Engine {
+    let dir = models_dir();
+    let manifest = Manifest::from_json(&std::fs::read(dir.join("manifest.json")).expect("manifest")).expect("valid manifest");
+    let set = ModelSet::load(manifest.model_set(TrackingMode::ThreePoint).expect("3-point models"), |f| {
+        std::fs::read(dir.join(f)).map_err(|e| InferError::ReadModel { file: f.into(), message: e.to_string() })
+    })
+    .expect("models load");
+    Engine::new().with_models(set)
+}
+
+fn session(observers: usize) -> AlignedSession {
+    let sim = simulate(&walking_circle(20.0), "bench", &SynthConfig { observers, ..SynthConfig::default() }, 1).expect("simulates");
+    align(&sim.session, &AlignOptions::default()).expect("aligns")
+}
+
+fn reconstruct(c: &mut Criterion) {
+    let engine = engine();
+    let mut group = c.benchmark_group("reconstruct");
+    group.sample_size(10);
+    for observers in [1, 3] {
+        let aligned = session(observers);
+        group.throughput(Throughput::Elements(aligned.timeline.frames as u64));
+        for method in [Method::EgoOnly, Method::EgoExo] {
+            let options = ReconstructOptions { method, ..ReconstructOptions::default() };
+            group.bench_with_input(BenchmarkId::new(method.name(), format!("{observers}-observer")), &aligned, |b, aligned| {
+                b.iter(|| engine.reconstruct(aligned, &options, &mut |_| true).expect("reconstructs"))
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, reconstruct);
+criterion_main!(benches);

@@ -72,16 +72,34 @@ impl OrbitCamera {
         camera
     }
 
-    /// Re-targets the camera to the centre of `bounds` and backs off until the bounding sphere
-    /// fits both the vertical and the horizontal field of view (viewport `aspect` = width /
-    /// height); keeps the heading and elevation.
+    /// Re-targets the camera to the centre of `bounds` and backs off just enough (plus a 6 %
+    /// margin) for all eight corners to project inside a viewport of `aspect` = width / height;
+    /// keeps the heading and elevation.
     pub fn frame(&mut self, bounds: Bounds, aspect: f32) {
         let aspect = if aspect.is_finite() && aspect > 0.0 { aspect } else { 1.0 };
-        let half_fov_x = ((FOV_Y * 0.5).tan() * aspect).atan();
-        let half_fov = (FOV_Y * 0.5).min(half_fov_x);
-        let radius = bounds.radius().max(0.5);
+        let tan_y = (FOV_Y * 0.5).tan();
+        let tan_x = tan_y * aspect;
         self.target = bounds.centre();
-        self.distance = (1.1 * radius / half_fov.sin()).clamp(DISTANCE_RANGE.0, DISTANCE_RANGE.1);
+        // Unit vectors of the view: right, up, and back (from the target towards the eye).
+        let back = (self.eye() - self.target).normalize_or(Vec3::Z);
+        let right = Vec3::Y.cross(back).normalize_or(Vec3::X);
+        let up = back.cross(right);
+        let mut distance = 0.5f32;
+        for corner in 0..8 {
+            let c = Vec3::new(
+                if corner & 1 == 0 { bounds.min.x } else { bounds.max.x },
+                if corner & 2 == 0 { bounds.min.y } else { bounds.max.y },
+                if corner & 4 == 0 { bounds.min.z } else { bounds.max.z },
+            ) - self.target;
+            // A corner at depth `distance - c·back` fits when its offsets fit the half-FOVs.
+            let needed = c.dot(back) + (c.dot(right).abs() / tan_x).max(c.dot(up).abs() / tan_y);
+            distance = distance.max(needed);
+        }
+        self.distance = if distance.is_finite() {
+            (1.06 * distance).clamp(DISTANCE_RANGE.0, DISTANCE_RANGE.1)
+        } else {
+            DISTANCE_RANGE.1
+        };
     }
 
     /// Eye position in the world, metres.
@@ -232,6 +250,7 @@ mod tests {
         for aspect in [0.5f32, 1.0, 2.5] {
             let cam = OrbitCamera::framing(bounds, aspect);
             let (w, h) = (1000.0 * aspect, 1000.0);
+            let mut widest = 0.0f32;
             for corner in 0..8 {
                 let c = Vec3::new(
                     if corner & 1 == 0 { bounds.min.x } else { bounds.max.x },
@@ -240,7 +259,10 @@ mod tests {
                 );
                 let p = cam.project(c, w, h).unwrap();
                 assert!(p.x > 0.0 && p.x < w && p.y > 0.0 && p.y < h, "aspect {aspect}: {c} → {p}");
+                widest = widest.max((2.0 * p.x / w - 1.0).abs()).max((2.0 * p.y / h - 1.0).abs());
             }
+            // Tight: the box fills the viewport up to the margin in one direction.
+            assert!(widest > 0.85, "aspect {aspect}: the box only reaches {widest} of the half-viewport");
         }
         assert!(Bounds::around([Vec3::NAN]).is_none());
     }

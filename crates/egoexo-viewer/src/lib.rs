@@ -7,12 +7,12 @@
 //! A floor grid at `floor_y`; the reconstructed SMPL skeleton (joints as spheres, bones as
 //! cylinders; left blue, right orange, centre white) — translucent grey on frames that were
 //! not reconstructed (`valid[f] == false`), hidden where a frame holds no pose (all zeros) or a
-//! joint is not finite; the head and wrist device trajectories (whole session as faint lines, a
-//! trail of 2 s before / 1 s after the current frame, a ball at the device); each tracked
-//! observer as a camera frustum (from `camera_poses` and `half_fov`, with a small "up" marker)
-//! and its rays from the camera centre to the ray endpoints, coloured by gate (red 0 → yellow
-//! 0.5 → green 1); the ground truth as a translucent cyan ghost; the ego-only reconstruction as
-//! a translucent violet overlay.
+//! joint is not finite; the head and wrist device trajectories (a trail of 2 s before / 1 s
+//! after the current frame and a ball at the device; the head's whole path as a faint line);
+//! each tracked observer as a camera frustum (from `camera_poses` and `half_fov`, with a small
+//! "up" marker) and its rays from the camera centre to the ray endpoints, coloured by gate
+//! (red 0 → yellow 0.5 → green 1); the ground truth as a translucent cyan ghost; the ego-only
+//! reconstruction as a translucent violet overlay.
 //!
 //! # JS API (`wasm-bindgen --target web`)
 //! ```js
@@ -31,7 +31,7 @@
 //! viewer.frame(); viewer.frames(); viewer.time(); viewer.fps(); viewer.speed();
 //! viewer.on_frame((frame, timeSeconds) => {});   // on each change of frame or play state, and once now
 //! viewer.resize(cssWidth, cssHeight, devicePixelRatio);
-//! viewer.reset_camera();             // frame the whole scene (also: double-click)
+//! viewer.reset_camera();             // frame the wearer + observers now (also: double-click)
 //! viewer.render_now();               // draw synchronously (tests read the canvas back after it)
 //! viewer.failure();                  // undefined, or why drawing stopped for good
 //! viewer.free();

@@ -306,36 +306,48 @@ pub fn build_frame(scene: &SceneData, frame: usize, layers: LayerToggles) -> Fra
     list
 }
 
-/// The world box the view camera frames: every reconstructed joint (sampled to at most ~2000
-/// frames), tracked observer cameras, and the floor under them.
+/// The box around everything the session shows: every reconstructed joint (sampled to at most
+/// ~2000 frames), every tracked observer position, and the floor under them. Sizes the grid.
 pub fn scene_bounds(scene: &SceneData) -> Option<Bounds> {
     let stride = scene.frames.div_ceil(2000).max(1);
     let frames = (0..scene.frames).step_by(stride);
     let joints = frames.clone().filter_map(|f| frame_joints(&scene.joints, f)).flatten();
     let observers =
         scene.observers.iter().flat_map(|o| frames.clone().filter_map(move |f| observer_pose(o, f).map(|(_, t)| t)));
-    let bounds = Bounds::around(joints.chain(observers))?;
-    let floor = Vec3::new(bounds.min.x, scene.floor_y, bounds.min.z);
+    with_floor(Bounds::around(joints.chain(observers))?, scene.floor_y)
+}
+
+/// The box the default view frames at `frame`: the wearer over the whole session (sampled to
+/// at most ~2000 frames), the observers tracked at `frame` (moving observers' whole paths would
+/// shrink the wearer to a speck), and the floor under them.
+pub fn view_bounds(scene: &SceneData, frame: usize) -> Option<Bounds> {
+    let stride = scene.frames.div_ceil(2000).max(1);
+    let joints = (0..scene.frames).step_by(stride).filter_map(|f| frame_joints(&scene.joints, f)).flatten();
+    let observers = scene.observers.iter().filter_map(|o| observer_pose(o, frame).map(|(_, t)| t));
+    with_floor(Bounds::around(joints.chain(observers))?, scene.floor_y)
+}
+
+fn with_floor(bounds: Bounds, floor_y: f32) -> Option<Bounds> {
+    let floor = Vec3::new(bounds.min.x, floor_y, bounds.min.z);
     Bounds::around([bounds.min, bounds.max, floor])
 }
 
 /// Lines drawn under everything for the whole session: the floor grid at `floor_y` around the
-/// scene, and each device's full trajectory (faint; broken where tracking is invalid).
+/// scene (1 m beyond everything it shows), and the head device's full path (faint; broken where
+/// tracking is invalid). Wrists get trails only: their whole paths tangle around the body.
 pub fn static_lines(scene: &SceneData) -> Vec<LineVertex> {
-    let bounds = scene_bounds(scene);
-    let (centre, half) = match bounds {
+    let (centre, half) = match scene_bounds(scene) {
         Some(b) => {
-            let c = b.centre();
-            let size = (b.max - b.min).max_element();
-            (c, (0.5 * size + 2.0).max(4.0))
+            let half_size = 0.5 * (b.max - b.min);
+            (b.centre(), (half_size.x.max(half_size.z) + 1.0).max(3.0))
         }
-        None => (Vec3::ZERO, 4.0),
+        None => (Vec3::ZERO, 3.0),
     };
     let mut lines = mesh::floor_grid(centre.x, centre.z, scene.floor_y, half, 0.5);
-    // Long sessions: at most ~20000 segments per device.
+    // Long sessions: at most ~20000 segments.
     let stride = scene.frames.div_ceil(20_000).max(1);
-    for device in &scene.devices {
-        let colour = colors::with_alpha(colors::device_colour(&device.name), 0.3);
+    for device in scene.devices.iter().filter(|d| d.name == "head") {
+        let colour = colors::with_alpha(colors::device_colour(&device.name), 0.35);
         let at = |f: usize| -> Option<[f32; 3]> {
             if !device.valid.get(f).copied().unwrap_or(false) {
                 return None;
@@ -513,18 +525,41 @@ mod tests {
     }
 
     #[test]
+    fn the_view_frames_the_wearer_and_the_observers_where_they_are_now() {
+        let mut scene = example_scene(20);
+        // The observer walks 10 m away along +X over the session.
+        for f in 0..20 {
+            scene.observers[0].camera_poses[7 * f + 4] += f as f32 * 0.5;
+        }
+        let now = view_bounds(&scene, 0).unwrap();
+        let all = scene_bounds(&scene).unwrap();
+        assert!(all.max.x > 9.0, "the grid covers the observer's whole walk");
+        assert!(now.max.x < 1.0, "the view frames where the observer is at frame 0: {now:?}");
+        let later = view_bounds(&scene, 19).unwrap();
+        assert!(later.max.x > 9.0);
+        // The wearer's whole session is always in view.
+        let wearer = crate::example::example_joints(19);
+        assert!(wearer.iter().all(|p| p.cmpge(now.min).all() && p.cmple(now.max).all()));
+        assert!(now.min.y <= scene.floor_y);
+    }
+
+    #[test]
     fn static_lines_lie_on_the_floor_and_trace_devices() {
         let scene = example_scene(50);
         let lines = static_lines(&scene);
         let floor = lines.iter().filter(|v| v.position[1] == scene.floor_y).count();
         assert!(floor > 40);
-        let devices = scene.devices.len();
-        assert_eq!(lines.len() - floor, devices * 2 * 49);
+        // The head's whole path: one segment per pair of frames.
+        assert_eq!(lines.len() - floor, 2 * 49);
+        assert!(
+            lines.iter().filter(|v| v.position[1] != scene.floor_y).all(|v| v.colour[..3] == colors::HEAD_DEVICE[..3])
+        );
         let bounds = scene_bounds(&scene).unwrap();
         assert!(bounds.min.y <= scene.floor_y && bounds.max.y > 1.5);
         let empty = SceneData::new("e", 30.0, 0, "ego-exo");
         assert!(build_frame(&empty, 0, ALL_LAYERS).is_empty());
         assert!(scene_bounds(&empty).is_none());
+        assert!(view_bounds(&empty, 0).is_none());
         assert!(!static_lines(&empty).is_empty());
     }
 }

@@ -13,7 +13,7 @@ use egoexo_viewer::Viewer;
 use egoexo_viewer::camera::OrbitCamera;
 use egoexo_viewer::colors;
 use egoexo_viewer::example::{example_joints, example_scene};
-use egoexo_viewer::scene::scene_bounds;
+use egoexo_viewer::scene::view_bounds;
 use glam::Vec3;
 use wasm_bindgen::{JsCast, JsValue};
 use wasm_bindgen_test::{wasm_bindgen_test, wasm_bindgen_test_configure};
@@ -83,7 +83,7 @@ fn is_background(p: [u8; 4]) -> bool {
 
 /// Where joint `j` of the example wearer at [`FRAME`] lands in the default view.
 fn joint_pixel(scene: &SceneData, j: usize) -> (f32, f32) {
-    let camera = OrbitCamera::framing(scene_bounds(scene).expect("scene has bounds"), W as f32 / H as f32);
+    let camera = OrbitCamera::framing(view_bounds(scene, FRAME).expect("scene has bounds"), W as f32 / H as f32);
     let p = camera.project(example_joints(FRAME)[j], W as f32, H as f32).expect("joint in front of the camera");
     (p.x, p.y)
 }
@@ -121,7 +121,7 @@ fn assert_skeleton_drawn(image: &Image, scene: &SceneData, what: &str) {
         assert!(is_background(image.pixel(x, y).unwrap()), "{what}: corner ({x}, {y}) is {:?}", image.pixel(x, y));
     }
     // Half a metre above the head there is nothing but background.
-    let camera = OrbitCamera::framing(scene_bounds(scene).unwrap(), W as f32 / H as f32);
+    let camera = OrbitCamera::framing(view_bounds(scene, FRAME).unwrap(), W as f32 / H as f32);
     let above = camera.project(example_joints(FRAME)[15] + Vec3::Y * 0.5, W as f32, H as f32).unwrap();
     assert!(
         image.any_near(above.x, above.y, 0, is_background),
@@ -193,7 +193,7 @@ fn is_violet(p: [u8; 4]) -> bool {
 async fn layers_toggle_rays_in_gate_colours_and_the_ego_only_overlay() {
     let mut scene = plain_scene();
     scene.ego_only_joints = example_scene(30).ego_only_joints;
-    let camera = OrbitCamera::framing(scene_bounds(&scene).unwrap(), W as f32 / H as f32);
+    let camera = OrbitCamera::framing(view_bounds(&scene, FRAME).unwrap(), W as f32 / H as f32);
     let observer = egoexo_viewer::example::EXAMPLE_OBSERVER_POSITION;
     // Midpoints of the rays to the right ankle (gate 1: green) and to the nose (gate 0: red).
     let rays = &scene.observers[0].rays[4 * 13 * FRAME..4 * 13 * (FRAME + 1)];

@@ -5,7 +5,7 @@
 use crate::camera::OrbitCamera;
 use crate::error::{BackendPreference, ViewerError};
 use crate::playback::Playback;
-use crate::scene::{LayerToggles, build_frame, parse_scene, scene_bounds, static_lines};
+use crate::scene::{LayerToggles, build_frame, parse_scene, static_lines, view_bounds};
 
 use super::gpu::{self, Gpu};
 use super::renderer::Renderer;
@@ -14,7 +14,7 @@ use super::renderer::Renderer;
 const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 
 /// Renders frame `frame` (rounded and clamped like `seek`) of the scene in `scene_json` at
-/// `width × height` pixels with the default view (the whole scene framed, default layers) and
+/// `width × height` pixels with the default view (`view_bounds` at that frame, default layers) and
 /// returns its RGBA pixels, rows top to bottom. `Auto` uses WebGPU when a device can be had
 /// (no canvas is involved, so presentation does not matter), else WebGL2.
 pub(crate) async fn render_offscreen(
@@ -49,7 +49,7 @@ pub(crate) async fn render_offscreen(
     let mut renderer = Renderer::new(&gpu.device, &gpu.queue, FORMAT, gpu::msaa_supported(&gpu, FORMAT));
     renderer.set_static_lines(&static_lines(&scene));
     let aspect = width as f32 / height as f32;
-    let camera = scene_bounds(&scene).map(|b| OrbitCamera::framing(b, aspect)).unwrap_or_default();
+    let camera = view_bounds(&scene, frame).map(|b| OrbitCamera::framing(b, aspect)).unwrap_or_default();
     let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
         label: Some("off-screen frame"),
         size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
@@ -73,9 +73,20 @@ pub(crate) async fn render_offscreen(
     Ok(pixels)
 }
 
+/// A WebGL2 device through a detached 1×1 canvas, retried a few times when the browser refuses
+/// the context (its GPU process may be restarting after a lost device).
 async fn webgl2_offscreen() -> Result<(Gpu, Option<(web_sys::HtmlCanvasElement, wgpu::Surface<'static>)>), ViewerError>
 {
-    let canvas = gpu::scratch_canvas(1, 1)?;
-    let (gpu, surface) = gpu::webgl2(&canvas).await?;
-    Ok((gpu, Some((canvas, surface))))
+    let mut last_error = None;
+    for delay in [0, 100, 250, 500, 1000] {
+        if delay > 0 {
+            gpu::sleep_ms(delay).await;
+        }
+        let canvas = gpu::scratch_canvas(1, 1)?;
+        match gpu::webgl2(&canvas).await {
+            Ok((gpu, surface)) => return Ok((gpu, Some((canvas, surface)))),
+            Err(e) => last_error = Some(e),
+        }
+    }
+    Err(last_error.unwrap_or_else(|| ViewerError::NoWebGl2("no attempt was made".into())))
 }

@@ -11,7 +11,7 @@ use web_sys::{Event, EventTarget, HtmlCanvasElement, KeyboardEvent, PointerEvent
 use crate::camera::OrbitCamera;
 use crate::error::{ActiveBackend, BackendPreference, ViewerError};
 use crate::playback::Playback;
-use crate::scene::{FrameDrawList, LayerToggles, build_frame, parse_scene, scene_bounds, static_lines};
+use crate::scene::{FrameDrawList, LayerToggles, build_frame, parse_scene, static_lines, view_bounds};
 
 use super::gpu::{self, Gpu};
 use super::renderer::Renderer;
@@ -97,18 +97,36 @@ fn replace_canvas(old: &HtmlCanvasElement) -> Result<HtmlCanvasElement, ViewerEr
     Ok(fresh)
 }
 
-/// A WebGL2 target on `canvas`, or on a fresh canvas put in its place when `canvas` cannot
-/// give a WebGL2 context.
-async fn webgl2_target(canvas: HtmlCanvasElement) -> Result<CanvasTarget, ViewerError> {
-    match gpu::webgl2(&canvas).await {
-        Ok((gpu, surface)) => CanvasTarget::new(canvas, gpu, surface),
-        Err(first) => {
-            log_warn(&format!("{first}; retrying on a fresh canvas element"));
-            let fresh = replace_canvas(&canvas)?;
-            let (gpu, surface) = gpu::webgl2(&fresh).await?;
-            CanvasTarget::new(fresh, gpu, surface)
+/// Pauses between WebGL2 attempts, ms: right after a WebGPU device is lost the browser's GPU
+/// process may still be restarting and refuse new contexts for a moment.
+const WEBGL2_RETRY_DELAYS_MS: [i32; 4] = [100, 250, 500, 1000];
+
+/// A WebGL2 target on `canvas` (unless `fresh_canvas`), else on a fresh canvas put in its
+/// place (a canvas that holds another kind of context cannot give a WebGL2 one), retried a few
+/// times when the browser refuses the context.
+async fn webgl2_target(canvas: HtmlCanvasElement, fresh_canvas: bool) -> Result<CanvasTarget, ViewerError> {
+    let canvas = if fresh_canvas {
+        replace_canvas(&canvas)?
+    } else {
+        match gpu::webgl2(&canvas).await {
+            Ok((gpu, surface)) => return CanvasTarget::new(canvas, gpu, surface),
+            Err(e) => {
+                log_warn(&format!("{e}; retrying on a fresh canvas element"));
+                replace_canvas(&canvas)?
+            }
         }
+    };
+    let mut attempt = gpu::webgl2(&canvas).await;
+    for delay in WEBGL2_RETRY_DELAYS_MS {
+        match attempt {
+            Ok(_) => break,
+            Err(e) => log_warn(&format!("{e}; retrying in {delay} ms")),
+        }
+        gpu::sleep_ms(delay).await;
+        attempt = gpu::webgl2(&canvas).await;
     }
+    let (gpu, surface) = attempt?;
+    CanvasTarget::new(canvas, gpu, surface)
 }
 
 /// A WebGPU target on `canvas`, after checking that WebGPU can present at all when `check`.
@@ -134,12 +152,12 @@ async fn connect(canvas: HtmlCanvasElement, preference: BackendPreference) -> Re
     match preference {
         BackendPreference::WebGpu => webgpu_target(canvas, true).await,
         BackendPreference::WebGpuUnchecked => webgpu_target(canvas, false).await,
-        BackendPreference::WebGl2 => webgl2_target(canvas).await,
+        BackendPreference::WebGl2 => webgl2_target(canvas, false).await,
         BackendPreference::Auto => match webgpu_target(canvas.clone(), true).await {
             Ok(target) => Ok(target),
             Err(e) => {
                 web_sys::console::info_1(&format!("egoexo viewer: using WebGL2 ({e})").into());
-                webgl2_target(canvas).await
+                webgl2_target(canvas, false).await
             }
         },
     }
@@ -228,8 +246,9 @@ impl State {
 
     fn reset_camera(&mut self) {
         let aspect = self.aspect();
-        self.camera =
-            self.scene.as_ref().and_then(scene_bounds).map(|b| OrbitCamera::framing(b, aspect)).unwrap_or_default();
+        let frame = self.playback.frame();
+        let bounds = self.scene.as_ref().and_then(|scene| view_bounds(scene, frame));
+        self.camera = bounds.map(|b| OrbitCamera::framing(b, aspect)).unwrap_or_default();
         self.dirty = true;
     }
 
@@ -350,12 +369,7 @@ async fn recover_on_webgl2(weak: Weak<RefCell<State>>) {
     let Some(old_canvas) = weak.upgrade().and_then(|s| s.try_borrow().ok().map(|s| s.target.canvas.clone())) else {
         return;
     };
-    let result = async {
-        let fresh = replace_canvas(&old_canvas)?;
-        let (gpu, surface) = gpu::webgl2(&fresh).await?;
-        CanvasTarget::new(fresh, gpu, surface)
-    }
-    .await;
+    let result = webgl2_target(old_canvas, true).await;
     let Some(state) = weak.upgrade() else { return };
     let Ok(mut s) = state.try_borrow_mut() else { return };
     s.recovering = false;
@@ -672,7 +686,7 @@ impl Viewer {
 
     /// Shows a scene: `bytes` are `serde_json` of a `SceneData`. Throws (and keeps the current
     /// scene) when the bytes are not a valid scene. Playback restarts paused at frame 0 with the
-    /// current speed; the camera frames the whole scene.
+    /// current speed; the camera frames the wearer's session and the observers at frame 0.
     pub fn set_scene_json(&self, bytes: &[u8]) -> Result<(), JsError> {
         let scene = parse_scene(bytes).map_err(|e| js_error(e.into()))?;
         self.update(|s| {
@@ -818,7 +832,7 @@ impl Viewer {
         })
     }
 
-    /// Frames the whole scene again (also on double-click).
+    /// Frames the wearer's session and the observers at the shown frame (also on double-click).
     pub fn reset_camera(&self) -> Result<(), JsError> {
         self.update(|s| {
             s.reset_camera();

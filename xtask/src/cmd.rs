@@ -21,6 +21,18 @@ pub fn output(cmd: &mut Command) -> Option<String> {
     out.status.success().then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
 }
 
+/// Runs `cmd` with stderr inherited, echoes and returns its stdout; fails on a non-zero exit.
+pub fn output_checked(cmd: &mut Command) -> Result<String> {
+    eprintln!("$ {}", describe(cmd));
+    let out = cmd.stderr(Stdio::inherit()).output().with_context(|| format!("could not start `{}`", describe(cmd)))?;
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    print!("{stdout}");
+    if !out.status.success() {
+        bail!("`{}` failed with {}", describe(cmd), out.status);
+    }
+    Ok(stdout)
+}
+
 /// Totals of the `test result:` lines a test run printed.
 #[derive(Debug, Default, Clone, Copy)]
 pub struct TestCounts {

@@ -4,13 +4,20 @@
 //!   Cargo.lock version, Chromium + chromedriver, the Python venv `target/py` from
 //!   `tests/requirements.txt`, `tests/node_modules` from `tests/package-lock.json`), runs the
 //!   native tests of the workspace (with `EGOEXO_PYTHON` and `EGOEXO_NODE_MODULES` set),
-//!   then the browser tests (wasm-bindgen-test in headless Chromium), and prints the counts.
+//!   then the browser tests (wasm-bindgen-test in headless Chromium), builds the web app and
+//!   runs its end-to-end tests (Playwright) and bench page, and prints the counts.
+//! - `cargo xtask serve` — builds the web app into `dist/` (both wasm modules, wasm-bindgen,
+//!   wasm-opt, `web/` + `public/` + the models) and serves it on http://127.0.0.1:8080/.
+//! - `cargo xtask dist` — only builds `dist/`; `cargo xtask bench-web` — runs the bench page.
 
 mod cmd;
+mod e2e;
+mod serve;
 mod test;
 mod tools;
+mod web;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -35,6 +42,55 @@ enum Command {
     },
     /// Install (if missing) the tools the tests need, and print where they are.
     Setup,
+    /// Build the web app into dist/ and serve it on 127.0.0.1 (default port 8080).
+    Serve {
+        #[command(flatten)]
+        app: AppArgs,
+        #[arg(long, default_value_t = 8080)]
+        port: u16,
+    },
+    /// Build the web app into dist/ only.
+    Dist {
+        #[command(flatten)]
+        app: AppArgs,
+    },
+    /// Build the web app and run its bench page in headless Chromium (median frames/s).
+    BenchWeb {
+        #[command(flatten)]
+        app: AppArgs,
+        /// Timed reconstructions (after one warm-up).
+        #[arg(long, default_value_t = 5)]
+        runs: u32,
+    },
+}
+
+/// How to build the web app.
+#[derive(clap::Args)]
+struct AppArgs {
+    /// Models folder (manifest.json + ONNX files); default: EGOEXO_MODELS, else models/.
+    #[arg(long)]
+    models: Option<PathBuf>,
+    /// Skip wasm-opt even when it is available.
+    #[arg(long)]
+    no_wasm_opt: bool,
+}
+
+impl AppArgs {
+    /// Builds dist/ and prints the module sizes.
+    fn build(&self, root: &Path) -> Result<()> {
+        let models = web::models_dir(root, self.models.as_deref())?;
+        if !self.no_wasm_opt {
+            // npm `binaryen` (a current wasm-opt) comes with the test packages.
+            if tools::find_on_path("npm").is_some() {
+                tools::ensure_node_packages(root)?;
+            }
+        }
+        let opt = if self.no_wasm_opt { web::WasmOpt::Off } else { web::WasmOpt::IfAvailable };
+        let sizes = web::build_dist(root, &models, opt)?;
+        println!("dist/ assembled (models from {}):", models.display());
+        web::print_sizes(&sizes);
+        Ok(())
+    }
 }
 
 fn main() -> Result<()> {
@@ -51,6 +107,34 @@ fn main() -> Result<()> {
             let n = tools::ensure_native_test_tools(&root)?;
             println!("python (venv, EGOEXO_PYTHON): {}", n.python.display());
             println!("node_modules (EGOEXO_NODE_MODULES): {}", n.node_modules.display());
+            Ok(())
+        }
+        Command::Serve { app, port } => {
+            app.build(&root)?;
+            let running = serve::spawn(&root.join("dist"), &format!("127.0.0.1:{port}"))?;
+            println!("serving dist/ at {} (Ctrl-C to stop)", running.url);
+            loop {
+                std::thread::park();
+            }
+        }
+        Command::Dist { app } => app.build(&root),
+        Command::BenchWeb { app, runs } => {
+            app.build(&root)?;
+            let chromium = tools::ensure_browser_test_tools(&root)?.chromium;
+            let run = e2e::BrowserRun { chromium, out: root.join("target").join("e2e") };
+            let web = e2e::run_bench(&root, &run, runs)?;
+            let models = web::models_dir(&root, app.models.as_deref())?;
+            let native = e2e::run_native_reference(&root, &models, runs)?;
+            println!("bench: {} frames, medians of {} runs (after one warm-up)", web.frames, web.runs);
+            for (what, w, n) in [
+                ("ego-exo", web.median_fps, native.median_fps),
+                ("whole app job", web.median_app_fps, native.median_app_fps),
+            ] {
+                println!(
+                    "  {what:<14} browser worker {w:>8.0} frames/s, native {n:>8.0} frames/s, browser/native {:.2}",
+                    w / n
+                );
+            }
             Ok(())
         }
     }

@@ -2,11 +2,12 @@
 
 use std::path::Path;
 use std::process::Command;
+use std::time::Instant;
 
 use anyhow::{Context, Result};
 
 use crate::cmd::{self, TestCounts};
-use crate::tools;
+use crate::{e2e, tools, web};
 
 /// Crates whose tests also run compiled to wasm32 in headless Chromium.
 const WASM_TEST_CRATES: &[&str] = &["egoexo-core", "egoexo-viewer"];
@@ -14,6 +15,16 @@ const WASM_TEST_CRATES: &[&str] = &["egoexo-core", "egoexo-viewer"];
 /// Single test targets (crate, test) that run compiled to wasm32 in headless Chromium, for
 /// crates whose other tests need native I/O.
 const WASM_TEST_TARGETS: &[(&str, &str)] = &[("egoexo-session", "export_wasm"), ("egoexo-session", "import_wasm")];
+
+/// Test targets (crate, test) that run in headless Chromium built with the web app's profile
+/// ([`web::WASM_PROFILE`]), so they reuse the app's compiled dependencies (tract). They build in
+/// one cargo invocation: the dependency features are then the union over these crates, which
+/// is what the worker module's own build resolves to, so nothing is compiled twice.
+const WASM_APP_PROFILE_TEST_TARGETS: &[(&str, &str)] =
+    &[("egoexo-web-worker", "worker_wasm"), ("egoexo-infer", "parity_wasm")];
+
+/// Timed reconstructions of the bench page during `cargo xtask test` (a figure, not a check).
+const TEST_BENCH_RUNS: u32 = 3;
 
 /// Chromium flags for a closed network and a root user (see shared/notes/toolchain.md);
 /// wasm-bindgen-test-runner adds `headless` and `no-sandbox` itself.
@@ -31,20 +42,52 @@ const CHROMIUM_ARGS: &[&str] = &[
     "enable-unsafe-swiftshader",
 ];
 
-pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
-    // Install first, so a missing tool fails fast rather than after the native tests.
-    let browser = if wasm { Some(tools::ensure_browser_test_tools(root)?) } else { None };
-    let native_tools = if native { Some(tools::ensure_native_test_tools(root)?) } else { None };
+/// Wall-clock time of each phase of a test run, printed in the summary (CI budgets them).
+#[derive(Debug, Default)]
+struct Phases(Vec<(String, f64)>);
 
-    let native_counts = match &native_tools {
+impl Phases {
+    /// Runs `f`, recording how long it took under `name`.
+    fn time<T>(&mut self, name: impl Into<String>, f: impl FnOnce() -> Result<T>) -> Result<T> {
+        let name = name.into();
+        let started = Instant::now();
+        let result = f();
+        let seconds = started.elapsed().as_secs_f64();
+        eprintln!("[xtask] {name}: {seconds:.0} s");
+        self.0.push((name, seconds));
+        result
+    }
+
+    fn print(&self) {
+        let total: f64 = self.0.iter().map(|(_, s)| s).sum();
+        for (name, seconds) in &self.0 {
+            println!("  {name:<58} {:>7.0} s", seconds);
+        }
+        println!("  {:<58} {:>7.0} s", "total", total);
+    }
+}
+
+pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
+    let mut phases = Phases::default();
+    // Install first, so a missing tool fails fast rather than after the native tests.
+    let (browser, native_tools) = phases.time("tools (install or check)", || {
+        let browser = if wasm { Some(tools::ensure_browser_test_tools(root)?) } else { None };
+        // The Node packages are needed by the exporter tests and by the app's browser tests.
+        let native_tools = if native || wasm { Some(tools::ensure_native_test_tools(root)?) } else { None };
+        Ok((browser, native_tools))
+    })?;
+
+    let native_counts = match (&native_tools, native) {
         // The exporter tests read their files back with numpy, bvhio and gltf-validator.
-        Some(t) => Some(cmd::run_tests(
-            Command::new("cargo")
-                .args(["test", "--workspace"])
-                .env("EGOEXO_PYTHON", &t.python)
-                .env("EGOEXO_NODE_MODULES", &t.node_modules),
-        )?),
-        None => None,
+        (Some(t), true) => Some(phases.time("native tests (cargo test --workspace)", || {
+            cmd::run_tests(
+                Command::new("cargo")
+                    .args(["test", "--workspace"])
+                    .env("EGOEXO_PYTHON", &t.python)
+                    .env("EGOEXO_NODE_MODULES", &t.node_modules),
+            )
+        })?),
+        _ => None,
     };
 
     let wasm_counts = match &browser {
@@ -53,22 +96,35 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
             let mut total = TestCounts::default();
             let crates = WASM_TEST_CRATES.iter().map(|krate| vec!["--package", krate]);
             let targets = WASM_TEST_TARGETS.iter().map(|(krate, test)| vec!["--package", krate, "--test", test]);
-            for selection in crates.chain(targets) {
-                let counts = cmd::run_tests(
-                    Command::new("cargo")
-                        .arg("test")
-                        .args(&selection)
-                        .args(["--target", "wasm32-unknown-unknown"])
-                        .env("CARGO_TARGET_WASM32_UNKNOWN_UNKNOWN_RUNNER", &t.wasm_bindgen_test_runner)
-                        .env("CHROMEDRIVER", &t.chromedriver)
-                        .env("WASM_BINDGEN_TEST_WEBDRIVER_JSON", &webdriver_json)
-                        .env("WASM_BINDGEN_TEST_TIMEOUT", "300"),
-                )?;
+            let app_targets = std::iter::once(
+                ["--profile", web::WASM_PROFILE]
+                    .into_iter()
+                    .chain(WASM_APP_PROFILE_TEST_TARGETS.iter().flat_map(|(krate, _)| ["--package", krate]))
+                    .chain(WASM_APP_PROFILE_TEST_TARGETS.iter().flat_map(|(_, test)| ["--test", test]))
+                    .collect::<Vec<_>>(),
+            );
+            for selection in crates.chain(targets).chain(app_targets) {
+                let name = format!("wasm tests: {}", selection.join(" "));
+                let counts = phases.time(name, || {
+                    cmd::run_tests(
+                        Command::new("cargo")
+                            .arg("test")
+                            .args(&selection)
+                            .args(["--target", "wasm32-unknown-unknown"])
+                            .env("CARGO_TARGET_WASM32_UNKNOWN_UNKNOWN_RUNNER", &t.wasm_bindgen_test_runner)
+                            .env("CHROMEDRIVER", &t.chromedriver)
+                            .env("WASM_BINDGEN_TEST_WEBDRIVER_JSON", &webdriver_json)
+                            .env("WASM_BINDGEN_TEST_TIMEOUT", "300"),
+                    )
+                })?;
                 total.passed += counts.passed;
                 total.failed += counts.failed;
                 total.ignored += counts.ignored;
             }
-            Some(total)
+            // Last, as it needs the models: the app, built with the profile (and so the
+            // dependencies) the app-profile tests just used.
+            let app = run_web_app(root, t, &mut phases)?;
+            Some((total, app))
         }
         None => None,
     };
@@ -78,10 +134,40 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
     if let Some(c) = native_counts {
         println!("native tests:                    {} passed, {} failed, {} ignored", c.passed, c.failed, c.ignored);
     }
-    if let Some(c) = wasm_counts {
+    if let Some((c, app)) = wasm_counts {
         println!("wasm tests (headless Chromium):  {} passed, {} failed, {} ignored", c.passed, c.failed, c.ignored);
+        let e = app.e2e;
+        println!("app end to end (Playwright):     {} passed, {} failed, {} ignored", e.passed, e.failed, e.ignored);
+        let b = &app.bench;
+        println!(
+            "bench page ({} frames, median of {}): {:.0} frames/s ego-exo, {:.0} frames/s whole app job",
+            b.frames, b.runs, b.median_fps, b.median_app_fps
+        );
+        web::print_sizes(&app.sizes);
     }
+    println!("phases (wall clock):");
+    phases.print();
     Ok(())
+}
+
+/// What the web app's browser run produced.
+struct WebAppRun {
+    sizes: Vec<web::ModuleSize>,
+    e2e: TestCounts,
+    bench: e2e::BenchResult,
+}
+
+/// Builds `dist/` (models from `models/` or `EGOEXO_MODELS`), then runs the Playwright suite
+/// and the bench page against it.
+fn run_web_app(root: &Path, t: &tools::BrowserTestTools, phases: &mut Phases) -> Result<WebAppRun> {
+    let models = web::models_dir(root, None)?;
+    // wasm-opt takes minutes on the worker module; the tests run the unoptimised build.
+    let sizes = phases
+        .time("web app: dist/ (both modules, wasm-bindgen)", || web::build_dist(root, &models, web::WasmOpt::Off))?;
+    let run = e2e::BrowserRun { chromium: t.chromium.clone(), out: root.join("target").join("e2e") };
+    let e2e = phases.time("web app: end to end (Playwright)", || e2e::run_suite(root, &run))?;
+    let bench = phases.time("web app: bench page", || e2e::run_bench(root, &run, TEST_BENCH_RUNS))?;
+    Ok(WebAppRun { sizes, e2e, bench })
 }
 
 /// The WebDriver capabilities file: Debian's Chromium binary and the flags it needs here.

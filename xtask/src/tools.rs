@@ -26,6 +26,13 @@ pub fn ensure_browser_test_tools(root: &Path) -> Result<BrowserTestTools> {
 
 const WASM_TARGET: &str = "wasm32-unknown-unknown";
 
+/// The wasm target and the `wasm-bindgen` CLI matching Cargo.lock (installed with the test
+/// runner, next to it).
+pub fn ensure_wasm_bindgen(root: &Path) -> Result<PathBuf> {
+    ensure_wasm_target()?;
+    Ok(ensure_wasm_bindgen_cli(root)?.with_file_name("wasm-bindgen"))
+}
+
 fn ensure_wasm_target() -> Result<()> {
     let installed = cmd::output(Command::new("rustup").args(["target", "list", "--installed"]))
         .context("rustup is needed to add the wasm32 target")?;
@@ -149,7 +156,7 @@ fn ensure_python_venv(root: &Path) -> Result<PathBuf> {
 
 /// `tests/node_modules` from `tests/package-lock.json` (`npm ci`); reinstalled when the lock
 /// file changes.
-fn ensure_node_packages(root: &Path) -> Result<PathBuf> {
+pub fn ensure_node_packages(root: &Path) -> Result<PathBuf> {
     let dir = root.join("tests");
     let node_modules = dir.join("node_modules");
     let lock = std::fs::read_to_string(dir.join("package-lock.json")).context("reading tests/package-lock.json")?;

@@ -1,0 +1,304 @@
+// The app end to end in headless Chromium, against dist/ as `cargo xtask serve` builds it.
+// Run by `cargo xtask test` (EGOEXO_E2E_URL points at the served dist/); screenshots go to
+// target/e2e/.
+
+import assert from 'node:assert/strict';
+import { readFileSync } from 'node:fs';
+import { join } from 'node:path';
+import { after, before, describe, test } from 'node:test';
+
+import { OUT, decodePng, launch, openApp, savePng, skeletonPixels } from './browser.mjs';
+
+const REPO = new URL('../../', import.meta.url).pathname;
+const SAMPLES = JSON.parse(readFileSync(join(REPO, 'public/samples/samples.json'), 'utf8'));
+const SAMPLE = SAMPLES.samples[0];
+// A multi-device Aria MPS folder (egoexo-session's committed fixture).
+const ARIA_FOLDER = join(REPO, 'crates/egoexo-session/tests/fixtures/aria_mps');
+// Skeleton pixels of each side a drawn body must show (a blank or background-only canvas has
+// none; the body is small in the viewer's whole-scene framing).
+const MIN_SIDE_PIXELS = 20;
+
+let browser;
+before(async () => {
+  browser = await launch();
+});
+after(async () => {
+  await browser?.close();
+});
+
+describe('the sample, WebGL2 canvas', () => {
+  let app;
+  before(async () => {
+    app = await openApp(browser, '?backend=webgl2');
+  });
+  after(async () => {
+    await app?.close();
+  });
+
+  test('reconstructs with a real progress bar and shows the frame count', async () => {
+    const { page } = app;
+    assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
+    assert.match(await app.text('#backend'), /webgl2/i);
+    const seen = [];
+    const watcher = setInterval(async () => {
+      try {
+        seen.push(await page.evaluate(() => [document.getElementById('progress').value, document.getElementById('progress-text').textContent]));
+      } catch {}
+    }, 50);
+    await page.click('#sample-button');
+    const state = await app.waitState(['ready', 'error']);
+    clearInterval(watcher);
+    assert.equal(state, 'ready', await app.text('#error-message'));
+    assert.equal(await app.text('#frame-count'), `${SAMPLE.frames} frames`);
+    assert.equal(await page.evaluate(() => window.egoexo.viewer.frames()), SAMPLE.frames);
+    assert.ok(seen.some(([v]) => v > 0 && v < 1), `no intermediate progress seen: ${JSON.stringify(seen.slice(0, 20))}`);
+    assert.ok(seen.some(([, t]) => /exo fusion/.test(t)), 'the fusion stage was shown');
+    const facts = await app.text('#session-facts');
+    assert.match(facts, /observer-1/);
+    assert.match(facts, /3-point tracking/);
+    assert.match(await app.text('#result-facts'), /MPJPE vs ground truth/);
+  });
+
+  test('plays: the frame advances, and the timeline steps and scrubs', async () => {
+    const { page } = app;
+    const frame = () => page.evaluate(() => window.egoexo.viewer.frame());
+    const first = await frame();
+    await page.waitForTimeout(600);
+    assert.notEqual(await frame(), first, 'the skeleton moves');
+    await page.click('#play-button');
+    assert.equal(await page.evaluate(() => window.egoexo.viewer.is_playing()), false);
+    await page.evaluate(() => {
+      const scrubber = document.getElementById('scrubber');
+      scrubber.value = '300';
+      scrubber.dispatchEvent(new Event('input'));
+    });
+    assert.equal(await frame(), 300);
+    await page.click('#step-forward');
+    assert.equal(await frame(), 301);
+    await page.waitForFunction(() => document.getElementById('frame-readout').textContent.startsWith('frame 302 /'));
+  });
+
+  test('draws the skeleton (screenshot has its colours)', async () => {
+    const { page } = app;
+    await page.screenshot({ path: join(OUT, 'app-webgl2.png') });
+    await page.uncheck('#show-rays');
+    await page.uncheck('#show-ground-truth');
+    await page.evaluate(() => window.egoexo.viewer.seek(300));
+    await page.waitForTimeout(300);
+    const shot = await page.locator('#view').screenshot({ path: join(OUT, 'sample-webgl2.png') });
+    const { rgba } = decodePng(shot);
+    const { left, right } = skeletonPixels(rgba);
+    assert.ok(left >= MIN_SIDE_PIXELS && right >= MIN_SIDE_PIXELS, `skeleton pixels: left ${left}, right ${right}`);
+  });
+
+  test('the toggles change the picture', async () => {
+    const { page } = app;
+    const before = decodePng(await page.locator('#view').screenshot()).rgba;
+    await page.check('#show-ego-only');
+    await page.check('#show-rays');
+    await page.waitForTimeout(300);
+    const after = decodePng(await page.locator('#view').screenshot({ path: join(OUT, 'sample-ego-only-overlay.png') })).rgba;
+    let changed = 0;
+    for (let i = 0; i < before.length; i += 4) if (before[i] !== after[i] || before[i + 2] !== after[i + 2]) changed += 1;
+    assert.ok(changed > 100, `${changed} pixels changed`);
+  });
+
+  test('exports download the worker\'s files', async () => {
+    const { page } = app;
+    const expectations = { bvh: 'HIERARCHY', csv: 'frame,time_s', glb: 'glTF', npz: 'PK' };
+    for (const [format, magic] of Object.entries(expectations)) {
+      const [download] = await Promise.all([page.waitForEvent('download'), page.click(`[data-format=${format}]`)]);
+      const session = await page.evaluate(() => window.egoexo.session.name);
+      assert.equal(download.suggestedFilename(), `${session}-ego-exo.${format}`);
+      const path = join(OUT, `export.${format}`);
+      await download.saveAs(path);
+      assert.equal(readFileSync(path).subarray(0, magic.length).toString('latin1'), magic, format);
+    }
+    await app.waitState('ready');
+  });
+
+  test('WebGPU renders the scene off-screen (pixel read-back)', async () => {
+    const { page } = app;
+    const result = await page.evaluate(async () => {
+      const { Viewer } = await import('./pkg/egoexo_viewer.js');
+      const [w, h] = [960, 720];
+      try {
+        const rgba = await Viewer.render_offscreen(window.egoexo.scene, 300, w, h, 'webgpu');
+        let binary = '';
+        for (let i = 0; i < rgba.length; i += 0x8000) binary += String.fromCharCode(...rgba.subarray(i, i + 0x8000));
+        return { w, h, base64: btoa(binary) };
+      } catch (error) {
+        return { error: String(error?.message ?? error) };
+      }
+    });
+    assert.equal(result.error, undefined, `render_offscreen failed: ${result.error}`);
+    const rgba = Buffer.from(result.base64, 'base64');
+    assert.equal(rgba.length, result.w * result.h * 4);
+    savePng('offscreen-webgpu.png', result.w, result.h, rgba);
+    const { left, right } = skeletonPixels(rgba);
+    assert.ok(left >= MIN_SIDE_PIXELS && right >= MIN_SIDE_PIXELS, `skeleton pixels: left ${left}, right ${right}`);
+  });
+
+  test('no console errors, no uncaught exceptions', () => {
+    assert.deepEqual(app.errors, []);
+  });
+});
+
+describe('bad input and failures', () => {
+  test('a malformed file shows the importer\'s exact message and the page keeps working', async () => {
+    const app = await openApp(browser, '?backend=webgl2');
+    try {
+      await app.waitState('idle');
+      await app.page.setInputFiles('#file-input', { name: 'broken.egoexo', mimeType: 'application/zip', buffer: Buffer.from('this is not a zip archive') });
+      assert.equal(await app.waitState(['error', 'ready']), 'error');
+      assert.equal(await app.text('#error-title'), 'Could not import the session');
+      assert.match(await app.text('#error-message'), /^broken\.egoexo: not a readable zip archive \(truncated or corrupt\?\): /);
+
+      // Dropped onto the page: a zip of something that is no session names what it holds.
+      await app.page.click('#error-dismiss');
+      const dataTransfer = await app.page.evaluateHandle(() => {
+        const dt = new DataTransfer();
+        dt.items.add(new File(['just some notes'], 'notes.txt', { type: 'text/plain' }));
+        return dt;
+      });
+      await app.page.dispatchEvent('#drop-zone', 'drop', { dataTransfer });
+      assert.equal(await app.waitState(['error', 'ready']), 'error');
+      assert.match(await app.text('#error-message'), /^notes\.txt: not a readable zip archive/);
+
+      // Not frozen, not blank: the controls answer and the canvas is still there.
+      assert.equal(await app.page.locator('#sample-button').isEnabled(), true);
+      assert.equal(await app.page.locator('#view').isVisible(), true);
+      assert.deepEqual(app.errors, []);
+    } finally {
+      await app.close();
+    }
+  });
+
+  test('a dropped Aria MPS folder imports and reconstructs', async () => {
+    const app = await openApp(browser, '?backend=webgl2');
+    try {
+      await app.waitState('idle');
+      await app.page.setInputFiles('#folder-input', ARIA_FOLDER);
+      assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
+      assert.match(await app.text('#session-facts'), /multi-device Aria MPS folder/);
+      assert.match(await app.text('#frame-count'), /^\d+ frames$/);
+      assert.deepEqual(app.errors, []);
+    } finally {
+      await app.close();
+    }
+  });
+
+  test('cancel stops the reconstruction, and a new worker takes over', async () => {
+    const app = await openApp(browser, '?backend=webgl2');
+    try {
+      await app.waitState('idle');
+      // Cancel as soon as the page shows a reconstruction stage, in the page itself: a click
+      // from the test process could come after the (quick) reconstruction has finished.
+      const stage = await app.page.evaluate(() => new Promise((resolve) => {
+        const text = document.getElementById('progress-text');
+        const observer = new MutationObserver(() => {
+          if (!/ego pass|exo fusion|overlay/.test(text.textContent)) return;
+          observer.disconnect();
+          document.getElementById('cancel-button').click();
+          resolve(text.textContent);
+        });
+        observer.observe(text, { childList: true, characterData: true, subtree: true });
+        document.getElementById('sample-button').click();
+      }));
+      assert.match(stage, /ego pass|exo fusion|overlay/);
+      assert.equal(await app.waitState(['cancelled', 'ready']), 'cancelled');
+      // The cancelled worker's queued result must not show up afterwards.
+      await app.page.waitForTimeout(500);
+      assert.equal(await app.page.evaluate(() => document.body.dataset.state), 'cancelled');
+      assert.equal(await app.text('#error-title'), 'Cancelled');
+      assert.equal(await app.page.locator('#progress-panel').isHidden(), true);
+      // The replacement worker answers (models from the Cache API): a quick failing import.
+      await app.page.setInputFiles('#file-input', { name: 'empty.zip', mimeType: 'application/zip', buffer: Buffer.alloc(0) });
+      assert.equal(await app.waitState(['error', 'ready']), 'error');
+      assert.match(await app.text('#error-message'), /^empty\.zip: the file is empty/);
+      assert.deepEqual(app.errors, []);
+    } finally {
+      await app.close();
+    }
+  });
+
+  test('a worker panic is caught, reported, and the worker replaced', async () => {
+    const app = await openApp(browser, '?backend=webgl2');
+    try {
+      await app.waitState('idle');
+      await app.page.evaluate(() => window.egoexo.worker.postMessage({ type: 'panic-for-test' }));
+      assert.equal(await app.waitState(['error']), 'error');
+      assert.match(await app.text('#error-title'), /worker crashed/);
+      assert.match(await app.text('#error-message'), /a panic requested by the test suite/);
+      await app.page.setInputFiles('#file-input', { name: 'broken.zip', mimeType: 'application/zip', buffer: Buffer.from('nope') });
+      await app.page.waitForFunction(() => document.getElementById('error-title').textContent === 'Could not import the session');
+      // The only console errors are the panic's own report.
+      assert.ok(app.errors.length > 0 && app.errors.every((e) => e.includes('panicked')), app.errors.join('\n'));
+    } finally {
+      await app.close();
+    }
+  });
+
+  test('models are fetched once, then come from the Cache API; a damaged model is refused', async () => {
+    let fetched = 0;
+    const count = (context) => context.route('**/*.onnx', (route) => {
+      fetched += 1;
+      return route.continue();
+    });
+    const app = await openApp(browser, '?backend=webgl2', { setup: count });
+    try {
+      await app.waitState('idle');
+      const cached = () => app.page.evaluate(async () => (await (await caches.open('egoexo-models')).keys()).length);
+      for (let tries = 0; (await cached()) === 0; tries += 1) {
+        assert.ok(tries < 1200, 'the models were never cached');
+        await app.page.waitForTimeout(100);
+      }
+      const first = fetched;
+      assert.ok(first > 0, 'the models were fetched');
+      await app.page.reload();
+      await app.waitState('idle');
+      // Open something, so the new worker has certainly loaded its models.
+      await app.page.setInputFiles('#file-input', { name: 'x.zip', mimeType: 'application/zip', buffer: Buffer.from('x') });
+      assert.equal(await app.waitState(['error', 'ready']), 'error');
+      assert.equal(await app.text('#error-title'), 'Could not import the session');
+      assert.equal(fetched, first, 'no model was fetched again');
+
+      // A corrupted download in a fresh context: the sha256 check names the file.
+      const corrupt = async (context) => {
+        await context.route('**/*.onnx', async (route) => {
+          const response = await route.fetch({ timeout: 120_000 });
+          const body = Buffer.from(await response.body());
+          body[body.length >> 1] ^= 0xff;
+          await route.fulfill({ response, body });
+        });
+      };
+      const fresh = await openApp(browser, '?backend=webgl2', { setup: corrupt });
+      try {
+        // The worker loads the models as the page starts: the failure shows without a click.
+        await fresh.waitState('error', 120_000);
+        assert.equal(await fresh.text('#error-title'), 'Could not load the models');
+        assert.match(await fresh.text('#error-message'), /\.onnx` does not match the manifest: sha256 [0-9a-f]{64}, expected [0-9a-f]{64}/);
+        // Trying a session tries the models again, and fails the same way.
+        await fresh.page.click('#error-dismiss');
+        await fresh.page.click('#sample-button');
+        await fresh.page.waitForFunction(() => !document.getElementById('error-panel').hidden, null, { timeout: 120_000 });
+        assert.equal(await fresh.text('#error-title'), 'Could not load the models');
+      } finally {
+        await fresh.close();
+      }
+    } finally {
+      await app.close();
+    }
+  });
+
+  test('the automatic backend choice ends with a working renderer', async () => {
+    const app = await openApp(browser);
+    try {
+      assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
+      assert.match(await app.text('#backend'), /renderer: (webgpu|webgl2)/i);
+      assert.deepEqual(app.errors, []);
+    } finally {
+      await app.close();
+    }
+  });
+});

@@ -1,0 +1,101 @@
+// Shared by the end-to-end tests and the bench: Debian's Chromium through playwright-core,
+// the app's URL (served by `cargo xtask`), console capture and pixel checks.
+
+import { mkdirSync, writeFileSync } from 'node:fs';
+import { join } from 'node:path';
+import { chromium } from 'playwright-core';
+import { PNG } from 'pngjs';
+
+export const APP_URL = process.env.EGOEXO_E2E_URL ?? 'http://127.0.0.1:8080/';
+export const OUT = process.env.EGOEXO_E2E_OUT ?? 'target/e2e';
+mkdirSync(OUT, { recursive: true });
+
+// A closed network and a root user (shared/notes/toolchain.md); WebGPU through SwiftShader.
+const ARGS = [
+  '--no-sandbox',
+  '--disable-quic',
+  '--no-first-run',
+  '--disable-background-networking',
+  '--disable-component-update',
+  '--disable-sync',
+  '--disable-default-apps',
+  '--disable-extensions',
+  '--enable-unsafe-webgpu',
+  '--enable-unsafe-swiftshader',
+];
+
+export function launch() {
+  return chromium.launch({
+    executablePath: process.env.EGOEXO_CHROMIUM ?? '/usr/bin/chromium',
+    headless: true,
+    args: ARGS,
+  });
+}
+
+// Opens the app in a fresh context (its own Cache API storage) and records every console
+// error, uncaught exception and failed worker of the page.
+// `setup(context)` runs before the page loads (e.g. to install request routes).
+export async function openApp(browser, query = '', { path = '', setup } = {}) {
+  const context = await browser.newContext({ viewport: { width: 1280, height: 800 }, acceptDownloads: true });
+  await setup?.(context);
+  const page = await context.newPage();
+  const errors = [];
+  page.on('console', (m) => {
+    if (m.type() === 'error') errors.push(`console: ${m.text()}`);
+  });
+  page.on('pageerror', (e) => errors.push(`uncaught: ${e.message}`));
+  page.on('worker', (w) => {
+    w.on('console', (m) => {
+      if (m.type() === 'error') errors.push(`worker console: ${m.text()}`);
+    });
+  });
+  await page.goto(new URL(path + query, APP_URL).href);
+  const app = {
+    page,
+    context,
+    errors,
+    // Waits until <body data-state> is one of `states`.
+    async waitState(states, timeout = 600_000) {
+      const list = [].concat(states);
+      await page.waitForFunction((l) => l.includes(document.body.dataset.state), list, { timeout, polling: 100 });
+      return page.evaluate(() => document.body.dataset.state);
+    },
+    text: (selector) => page.locator(selector).innerText(),
+    async close() {
+      await context.close();
+    },
+  };
+  return app;
+}
+
+export function decodePng(buffer) {
+  const png = PNG.sync.read(buffer);
+  return { width: png.width, height: png.height, rgba: png.data };
+}
+
+export function savePng(name, width, height, rgba) {
+  const png = new PNG({ width, height });
+  png.data = Buffer.from(rgba);
+  const path = join(OUT, name);
+  writeFileSync(path, PNG.sync.write(png));
+  return path;
+}
+
+// Pixels in the skeleton's colours: egoexo-viewer's palette draws the reconstruction's left
+// side saturated blue [0.20, 0.52, 1.00] and its right side saturated orange
+// [1.00, 0.45, 0.12], lit and shaded (channel ratios stay). Nothing else in the scene is that
+// saturated in those hues: frustums are cyan and magenta, the device trails and the
+// ground-truth ghost pale, the grid grey; only observer rays (red → yellow → green by gate)
+// pass through orange, so pixel checks of the right side turn the rays off.
+export function skeletonPixels(rgba) {
+  let left = 0;
+  let right = 0;
+  for (let i = 0; i < rgba.length; i += 4) {
+    const r = rgba[i];
+    const g = rgba[i + 1];
+    const b = rgba[i + 2];
+    if (b >= 140 && r <= 0.4 * b && g <= 0.65 * b && g >= r) left += 1;
+    else if (r >= 140 && g <= 0.58 * r && g >= 0.28 * r && b <= 0.3 * r) right += 1;
+  }
+  return { left, right };
+}

@@ -1,0 +1,143 @@
+//! The app in a real browser: the Playwright suite (`tests/e2e/*.test.mjs`, Node's test runner,
+//! `playwright-core` driving Debian's Chromium) and the bench page (`tests/e2e/bench.mjs`),
+//! both against `dist/` served by [`crate::serve`].
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use anyhow::{Context, Result, bail};
+
+use crate::cmd::{self, TestCounts};
+use crate::serve;
+
+/// What the browser scripts need to know.
+#[derive(Clone, Debug)]
+pub struct BrowserRun {
+    pub chromium: PathBuf,
+    /// Screenshots and reports go here (`target/e2e`).
+    pub out: PathBuf,
+}
+
+impl BrowserRun {
+    fn node(&self, root: &Path, url: &str) -> Command {
+        let mut c = Command::new("node");
+        c.current_dir(root)
+            .env("EGOEXO_E2E_URL", url)
+            .env("EGOEXO_CHROMIUM", &self.chromium)
+            .env("EGOEXO_E2E_OUT", &self.out);
+        c
+    }
+}
+
+/// Serves `dist/` and runs every `tests/e2e/*.test.mjs`; returns the counts.
+pub fn run_suite(root: &Path, run: &BrowserRun) -> Result<TestCounts> {
+    std::fs::create_dir_all(&run.out)?;
+    let server = serve::spawn(&root.join("dist"), "127.0.0.1:0")?;
+    let dir = root.join("tests").join("e2e");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .with_context(|| format!("reading {}", dir.display()))?
+        .map(|e| e.map(|e| e.path()))
+        .collect::<std::io::Result<_>>()?;
+    files.retain(|p| p.to_string_lossy().ends_with(".test.mjs"));
+    files.sort();
+    let tap = run.out.join("results.tap");
+    let status = {
+        let mut c = run.node(root, &server.url);
+        c.args(["--test", "--test-concurrency=1", "--test-reporter=spec", "--test-reporter-destination=stdout"])
+            .arg("--test-reporter=tap")
+            .arg(format!("--test-reporter-destination={}", tap.display()))
+            .args(&files);
+        eprintln!("$ node --test {} (app at {})", files.len(), server.url);
+        c.status().context("running node (is Node.js installed?)")?
+    };
+    let counts = tap_counts(&std::fs::read_to_string(&tap).unwrap_or_default());
+    if !status.success() || counts.failed > 0 {
+        bail!("the browser end-to-end tests failed ({} passed, {} failed)", counts.passed, counts.failed);
+    }
+    if counts.passed == 0 {
+        bail!("the browser end-to-end tests ran no test");
+    }
+    Ok(counts)
+}
+
+/// Counts from a TAP report's closing `# pass N` / `# fail N` / `# skipped N` lines.
+fn tap_counts(tap: &str) -> TestCounts {
+    let mut counts = TestCounts::default();
+    for line in tap.lines() {
+        let mut words = line.split_whitespace();
+        let (Some("#"), Some(kind), Some(n)) = (words.next(), words.next(), words.next()) else { continue };
+        let Ok(n) = n.parse::<u64>() else { continue };
+        match kind {
+            "pass" => counts.passed = n,
+            "fail" => counts.failed = n,
+            "skipped" | "todo" => counts.ignored += n,
+            _ => {}
+        }
+    }
+    counts
+}
+
+/// The bench page's result.
+#[derive(Clone, Debug)]
+pub struct BenchResult {
+    pub frames: u64,
+    pub runs: u64,
+    pub median_fps: f64,
+    /// The whole job the app runs (ego-exo + ego-only overlay + scene), median frames/s.
+    pub median_app_fps: f64,
+}
+
+/// Serves `dist/` and runs `web/bench.html` `runs` times through `tests/e2e/bench.mjs`.
+pub fn run_bench(root: &Path, run: &BrowserRun, runs: u32) -> Result<BenchResult> {
+    std::fs::create_dir_all(&run.out)?;
+    let server = serve::spawn(&root.join("dist"), "127.0.0.1:0")?;
+    let script = root.join("tests").join("e2e").join("bench.mjs");
+    let out = cmd::output_checked(run.node(root, &server.url).arg(&script).arg(runs.to_string()))?;
+    let line = out.lines().rev().find_map(|l| l.strip_prefix("BENCH ")).context("the bench printed no BENCH line")?;
+    let v: serde_json::Value = serde_json::from_str(line).with_context(|| format!("bench result `{line}`"))?;
+    let number = |k: &str| v[k].as_f64().with_context(|| format!("bench result has no `{k}`: {line}"));
+    Ok(BenchResult {
+        frames: number("frames")? as u64,
+        runs: number("runs")? as u64,
+        median_fps: number("median_fps")?,
+        median_app_fps: number("median_app_fps")?,
+    })
+}
+
+/// The bench's native reference: the same sample, models and jobs timed natively (release
+/// build of `crates/egoexo-web-worker/examples/bench_native.rs`).
+pub fn run_native_reference(root: &Path, models: &Path, runs: u32) -> Result<BenchResult> {
+    let samples: serde_json::Value = serde_json::from_slice(&std::fs::read(root.join("public/samples/samples.json"))?)?;
+    let file = samples["samples"][0]["file"].as_str().context("public/samples/samples.json lists no sample")?;
+    let sample = root.join("public").join("samples").join(file);
+    let out = cmd::output_checked(
+        Command::new("cargo")
+            .args(["run", "--quiet", "--release", "-p", "egoexo-web-worker", "--example", "bench_native", "--"])
+            .arg(models)
+            .arg(&sample)
+            .arg(runs.to_string()),
+    )?;
+    let line =
+        out.lines().rev().find_map(|l| l.strip_prefix("BENCH_NATIVE ")).context("no BENCH_NATIVE line printed")?;
+    let v: serde_json::Value = serde_json::from_str(line).with_context(|| format!("native bench result `{line}`"))?;
+    let number = |k: &str| v[k].as_f64().with_context(|| format!("native bench result has no `{k}`: {line}"));
+    Ok(BenchResult {
+        frames: number("frames")? as u64,
+        runs: number("runs")? as u64,
+        median_fps: number("median_fps")?,
+        median_app_fps: number("median_app_fps")?,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counts_from_the_tap_summary() {
+        let tap = "TAP version 13\n# Subtest: a\nok 1 - a\n1..7\n# tests 7\n# suites 0\n# pass 6\n# fail 1\n\
+                   # cancelled 0\n# skipped 0\n# todo 0\n# duration_ms 1234.5\n";
+        let c = tap_counts(tap);
+        assert_eq!((c.passed, c.failed, c.ignored), (6, 1, 0));
+    }
+}

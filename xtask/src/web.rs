@@ -1,0 +1,262 @@
+//! The web app's build: both wasm modules (profile `wasm-release`, `+simd128` from
+//! `.cargo/config.toml`), wasm-bindgen `--target web`, wasm-opt when a current one is at hand,
+//! and `dist/` assembled from `web/`, `public/`, the models and the generated `pkg/`.
+
+use std::hash::{DefaultHasher, Hash, Hasher};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use anyhow::{Context, Result, bail};
+
+use crate::{cmd, tools};
+
+/// The Cargo profile of the browser modules (release without debug info; see Cargo.toml).
+/// The worker's wasm tests build with it too, so they reuse the compiled dependencies.
+pub const WASM_PROFILE: &str = "wasm-release";
+pub const WASM_TARGET: &str = "wasm32-unknown-unknown";
+
+/// The browser crates: (package, library name). Each is its own wasm module.
+pub const MODULES: &[(&str, &str)] = &[("egoexo-web-worker", "egoexo_web_worker"), ("egoexo-viewer", "egoexo_viewer")];
+
+/// Where the models come from, in order: `--models`, `EGOEXO_MODELS`, `models/`.
+pub fn models_dir(root: &Path, given: Option<&Path>) -> Result<PathBuf> {
+    let (dir, how) = match (given, std::env::var_os("EGOEXO_MODELS")) {
+        (Some(dir), _) => (dir.to_path_buf(), "--models"),
+        (None, Some(dir)) => (PathBuf::from(dir), "EGOEXO_MODELS"),
+        (None, None) => (root.join("models"), "the default"),
+    };
+    if !dir.join("manifest.json").is_file() {
+        bail!(
+            "{}/manifest.json not found ({how}): the app needs the trained models (manifest.json + \
+             ONNX files, committed to models/). For development, point at another models folder with \
+             --models DIR or EGOEXO_MODELS=DIR, e.g. the untrained fixture \
+             crates/egoexo-infer/tests/fixtures/models",
+            dir.display()
+        );
+    }
+    Ok(dir)
+}
+
+/// Whether to run wasm-opt.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WasmOpt {
+    /// When a current wasm-opt is found (npm `binaryen` in tests/node_modules, or on PATH).
+    IfAvailable,
+    Off,
+}
+
+/// Size of one built module.
+#[derive(Clone, Debug)]
+pub struct ModuleSize {
+    pub file: String,
+    pub raw: u64,
+    pub gzipped: u64,
+    pub optimised: bool,
+}
+
+/// Builds both modules and assembles `dist/`. Returns the module sizes.
+pub fn build_dist(root: &Path, models: &Path, wasm_opt: WasmOpt) -> Result<Vec<ModuleSize>> {
+    let wasm_bindgen = tools::ensure_wasm_bindgen(root)?;
+    let wasm_opt = match wasm_opt {
+        WasmOpt::IfAvailable => find_wasm_opt(root),
+        WasmOpt::Off => None,
+    };
+    if wasm_opt.is_none() {
+        eprintln!("note: serving wasm without wasm-opt (not requested, or no current wasm-opt found)");
+    }
+    let pkg = root.join("target").join("web").join("pkg");
+    std::fs::create_dir_all(&pkg)?;
+    let mut sizes = Vec::new();
+    for (package, lib) in MODULES {
+        build_module(package)?;
+        let wasm = root.join("target").join(WASM_TARGET).join(WASM_PROFILE).join(format!("{lib}.wasm"));
+        cmd::run(
+            Command::new(&wasm_bindgen).arg(&wasm).args(["--target", "web", "--no-typescript", "--out-dir"]).arg(&pkg),
+        )?;
+        let module = pkg.join(format!("{lib}_bg.wasm"));
+        let optimised = match &wasm_opt {
+            Some(tool) => {
+                optimise(root, tool, &module)?;
+                true
+            }
+            None => false,
+        };
+        let bytes = std::fs::read(&module).with_context(|| format!("reading {}", module.display()))?;
+        sizes.push(ModuleSize {
+            file: format!("pkg/{lib}_bg.wasm"),
+            raw: bytes.len() as u64,
+            gzipped: gzipped_len(&bytes)?,
+            optimised,
+        });
+    }
+    assemble(root, models, &pkg)?;
+    Ok(sizes)
+}
+
+/// `cargo build` of one browser crate (one invocation per crate, so each crate's dependency
+/// features are the same as in its own test build and nothing is rebuilt between them).
+pub fn build_module(package: &str) -> Result<()> {
+    cmd::run(Command::new("cargo").args(["build", "--profile", WASM_PROFILE, "--target", WASM_TARGET, "-p", package]))
+}
+
+/// wasm-opt's flags: size-optimised, with the wasm features rustc emits for wasm32 today
+/// (Debian's old binaryen breaks reference types; npm `binaryen` is current).
+const WASM_OPT_FLAGS: &[&str] = &[
+    "-O3",
+    "--enable-simd",
+    "--enable-reference-types",
+    "--enable-bulk-memory",
+    "--enable-nontrapping-float-to-int",
+    "--enable-sign-ext",
+    "--enable-mutable-globals",
+    "--enable-multivalue",
+];
+
+/// A wasm-opt from npm `binaryen` (tests/node_modules) or PATH, version 116 or later.
+fn find_wasm_opt(root: &Path) -> Option<PathBuf> {
+    let npm = root.join("tests").join("node_modules").join(".bin").join("wasm-opt");
+    [Some(npm), tools::find_on_path("wasm-opt")].into_iter().flatten().find(|tool| {
+        let version = cmd::output(Command::new(tool).arg("--version")).unwrap_or_default();
+        // "wasm-opt version 123 (version_123)"
+        let number = version.split_whitespace().nth(2).and_then(|v| v.parse::<u32>().ok());
+        number.is_some_and(|n| n >= 116)
+    })
+}
+
+/// Runs wasm-opt on `module` in place; the result is cached by the input's hash (wasm-opt
+/// takes minutes on the worker module).
+fn optimise(root: &Path, tool: &Path, module: &Path) -> Result<()> {
+    let input = std::fs::read(module)?;
+    let mut hasher = DefaultHasher::new();
+    input.hash(&mut hasher);
+    WASM_OPT_FLAGS.hash(&mut hasher);
+    let key = format!("{:016x}", hasher.finish());
+    let cache = root.join("target").join("web").join("wasm-opt");
+    std::fs::create_dir_all(&cache)?;
+    let name = module.file_name().context("module file name")?.to_string_lossy().into_owned();
+    let cached = cache.join(format!("{name}.{key}"));
+    if !cached.is_file() {
+        for old in std::fs::read_dir(&cache)? {
+            let old = old?.path();
+            if old.file_name().is_some_and(|n| n.to_string_lossy().starts_with(&format!("{name}."))) {
+                std::fs::remove_file(old)?;
+            }
+        }
+        let partial = cache.join(format!("{name}.partial"));
+        cmd::run(Command::new(tool).arg(module).args(WASM_OPT_FLAGS).arg("-o").arg(&partial))?;
+        std::fs::rename(&partial, &cached)?;
+    }
+    std::fs::copy(&cached, module)?;
+    Ok(())
+}
+
+fn gzipped_len(bytes: &[u8]) -> Result<u64> {
+    let mut encoder = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
+    encoder.write_all(bytes)?;
+    Ok(encoder.finish()?.len() as u64)
+}
+
+/// `dist/` = `web/` + `public/` + `models/` (the manifest, the files it lists, and any
+/// Markdown model card) + `pkg/`.
+fn assemble(root: &Path, models: &Path, pkg: &Path) -> Result<()> {
+    let dist = root.join("dist");
+    if dist.exists() {
+        std::fs::remove_dir_all(&dist).with_context(|| format!("clearing {}", dist.display()))?;
+    }
+    copy_tree(&root.join("web"), &dist)?;
+    copy_tree(&root.join("public"), &dist)?;
+    copy_tree(pkg, &dist.join("pkg"))?;
+    let manifest = std::fs::read(models.join("manifest.json"))?;
+    let listed = model_files(&manifest).with_context(|| format!("reading {}/manifest.json", models.display()))?;
+    let out = dist.join("models");
+    std::fs::create_dir_all(&out)?;
+    std::fs::write(out.join("manifest.json"), &manifest)?;
+    for file in listed {
+        let from = models.join(&file);
+        let to = out.join(&file);
+        std::fs::create_dir_all(to.parent().context("model path")?)?;
+        std::fs::copy(&from, &to).with_context(|| format!("copying {} (listed in manifest.json)", from.display()))?;
+    }
+    for entry in std::fs::read_dir(models)? {
+        let path = entry?.path();
+        if path.extension().is_some_and(|e| e == "md") {
+            std::fs::copy(&path, out.join(path.file_name().context("file name")?))?;
+        }
+    }
+    Ok(())
+}
+
+/// The model files a manifest lists (`model_sets[].{egonet,gate,fusion}.file`); paths must
+/// stay inside the models folder.
+fn model_files(manifest: &[u8]) -> Result<Vec<String>> {
+    let value: serde_json::Value = serde_json::from_slice(manifest)?;
+    let sets = value["model_sets"].as_array().context("no `model_sets` array")?;
+    let mut files = Vec::new();
+    for set in sets {
+        for network in ["egonet", "gate", "fusion"] {
+            let file = set[network]["file"].as_str().with_context(|| format!("no `{network}.file`"))?;
+            if file.starts_with('/') || file.split(['/', '\\']).any(|p| p == "..") {
+                bail!("model file `{file}` leaves the models folder");
+            }
+            files.push(file.to_string());
+        }
+    }
+    Ok(files)
+}
+
+fn copy_tree(from: &Path, to: &Path) -> Result<()> {
+    std::fs::create_dir_all(to)?;
+    for entry in std::fs::read_dir(from).with_context(|| format!("reading {}", from.display()))? {
+        let entry = entry?;
+        let target = to.join(entry.file_name());
+        if entry.file_type()?.is_dir() {
+            copy_tree(&entry.path(), &target)?;
+        } else {
+            std::fs::copy(entry.path(), &target)
+                .with_context(|| format!("copying {} to {}", entry.path().display(), target.display()))?;
+        }
+    }
+    Ok(())
+}
+
+/// Prints the module sizes.
+pub fn print_sizes(sizes: &[ModuleSize]) {
+    for s in sizes {
+        println!(
+            "{:<34} {:>6.2} MB raw, {:>5.2} MB gzipped{}",
+            s.file,
+            s.raw as f64 / 1e6,
+            s.gzipped as f64 / 1e6,
+            if s.optimised { " (wasm-opt)" } else { "" }
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn model_files_come_from_every_set_and_stay_inside() {
+        let manifest = br#"{"model_sets": [
+            {"egonet": {"file": "1pt/egonet.onnx"}, "gate": {"file": "1pt/gate.onnx"}, "fusion": {"file": "1pt/fusion.onnx"}},
+            {"egonet": {"file": "3pt/egonet.onnx"}, "gate": {"file": "3pt/gate.onnx"}, "fusion": {"file": "3pt/fusion.onnx"}}
+        ]}"#;
+        let files = model_files(manifest).unwrap();
+        assert_eq!(files.len(), 6);
+        assert_eq!(files[3], "3pt/egonet.onnx");
+        let escaping =
+            br#"{"model_sets": [{"egonet": {"file": "../secret"}, "gate": {"file": "g"}, "fusion": {"file": "f"}}]}"#;
+        assert!(model_files(escaping).unwrap_err().to_string().contains("leaves the models folder"));
+        assert!(model_files(b"{}").is_err());
+    }
+
+    #[test]
+    fn a_missing_models_folder_says_what_to_do() {
+        let err = models_dir(Path::new("/nonexistent"), Some(Path::new("/nonexistent/models"))).unwrap_err();
+        let message = err.to_string();
+        assert!(message.contains("/nonexistent/models/manifest.json not found (--models)"), "{message}");
+        assert!(message.contains("EGOEXO_MODELS"), "{message}");
+    }
+}

@@ -65,9 +65,13 @@ const STAGE_TITLES = {
 
 function spawnWorker() {
   const worker = new Worker(new URL('worker.js', import.meta.url), { type: 'module' });
-  worker.onmessage = (event) => onWorkerMessage(event.data);
+  // A replaced (cancelled, crashed) worker's last messages may still be queued: ignore them.
+  worker.onmessage = (event) => {
+    if (state.worker === worker) onWorkerMessage(event.data);
+  };
   worker.onerror = (event) => {
     event.preventDefault();
+    if (state.worker !== worker) return;
     restartWorker();
     fail('The worker stopped', event.message || 'the worker script failed to load');
   };

@@ -66,8 +66,10 @@ def main():
         raise SystemExit("the EgoNet and fusion checkpoints are for different tracking modes")
     entry, _ = export_model_set(egonet, gate.eval(), fusion.eval(), points, config["max_observers"], config["hidden"],
                                 args.out, f"{points}pt")
-    if config["shard_index"].get("egonet_sha256") != entry["egonet"]["sha256"]:
-        raise SystemExit("the fusion network was trained on coarse poses from a different EgoNet export")
+    # Stage 2 trains on cross-fitted coarse poses (fold EgoNets, each predicting clips it never
+    # saw); its validation shards come from the EgoNet shipped here.
+    if config.get("val_egonet_sha256") != entry["egonet"]["sha256"]:
+        raise SystemExit("the fusion network was validated on coarse poses from a different EgoNet export")
 
     manifest_path = args.out / "manifest.json"
     manifest = json.loads(manifest_path.read_text()) if manifest_path.exists() else {

@@ -39,14 +39,37 @@ BATCH_KEYS_EXTRA = ["target_positions"]
 FUSION_KEYS = EGO_KEYS + ["egonet", "rays", "ray_valid", "gate_features", "observer_mask", "occluded"]
 
 
-def load_shards(folder: Path, keys: list) -> dict:
-    """All shards of a folder, concatenated, as float32 torch tensors."""
-    index = json.loads((folder / "index.json").read_text())
+def parse_fold(text: str) -> tuple:
+    k, n = (int(x) for x in text.split("/"))
+    if n < 2 or not 0 <= k < n:
+        raise argparse.ArgumentTypeError(f"expected K/N with N >= 2 and 0 <= K < N, got {text!r}")
+    return k, n
+
+
+def load_shards(folders, keys: list, exclude_fold=None) -> dict:
+    """All shards of one or more folders, concatenated, as float32 torch tensors. With
+    `exclude_fold = (k, n)` the windows of library clips `c` with `c mod n == k` are dropped
+    (the same folds as `egoexo synth --fold`). The index returned is the first folder's, with
+    the EgoNet hashes of all folders under "egonet_sha256s"."""
+    folders = [folders] if isinstance(folders, Path) else list(folders)
+    indices = [json.loads((f / "index.json").read_text()) for f in folders]
     parts = {k: [] for k in keys}
-    for entry in index["shards"]:
-        with np.load(folder / entry["file"]) as npz:
-            for k in keys:
-                parts[k].append(npz[k].astype(np.float32))
+    for folder, index in zip(folders, indices):
+        for entry in index["shards"]:
+            with np.load(folder / entry["file"]) as npz:
+                keep = slice(None)
+                if exclude_fold is not None:
+                    keep = npz["clip"] % exclude_fold[1] != exclude_fold[0]
+                for k in keys:
+                    parts[k].append(npz[k][keep].astype(np.float32))
+    for key in ("window", "pose_dim", "ego_feature_layout_version", "gate_feature_layout_version", "stage"):
+        if len({json.dumps(i.get(key)) for i in indices}) != 1:
+            raise SystemExit(f"shard folders {[str(f) for f in folders]} disagree on {key}")
+    index = dict(indices[0])
+    index["egonet_sha256s"] = sorted({i["egonet_sha256"] for i in indices if i.get("egonet_sha256")})
+    index["subjects"] = sorted({s for i in indices for s in i["subjects"]})
+    index["windows"] = sum(i["windows"] for i in indices)
+    index["frames_simulated"] = sum(i["frames_simulated"] for i in indices)
     data = {k: torch.from_numpy(np.concatenate(v)) for k, v in parts.items()}
     # The targets' head-relative joint positions never change: compute them once.
     with torch.no_grad():
@@ -113,7 +136,10 @@ def take(data: dict, idx, keys) -> dict:
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--stage", choices=["ego", "fusion"], required=True)
-    parser.add_argument("--shards", type=Path, required=True)
+    parser.add_argument("--shards", type=Path, nargs="+", required=True,
+                        help="shard folders (several: e.g. the cross-fitted folds of stage 2)")
+    parser.add_argument("--exclude-fold", type=parse_fold, default=None,
+                        help="K/N: drop the windows of clips in fold K of N (a cross-fitting EgoNet)")
     parser.add_argument("--val", type=Path, required=True)
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--egonet-hidden", type=int, default=256)
@@ -134,11 +160,11 @@ def main():
     torch.set_num_threads(args.threads)
     generator = torch.Generator().manual_seed(args.seed)
     keys = EGO_KEYS if args.stage == "ego" else FUSION_KEYS
-    train_data = load_shards(args.shards, keys)
+    train_data = load_shards(args.shards, keys, args.exclude_fold)
     val_data = load_shards(args.val, keys)
     index = train_data["index"]
-    if args.stage == "fusion" and val_data["index"].get("egonet_sha256") != index.get("egonet_sha256"):
-        raise SystemExit("validation shards were made with a different EgoNet than the training shards")
+    if args.stage == "fusion" and not index["egonet_sha256s"]:
+        raise SystemExit("fusion shards carry no EgoNet hash: make them with `egoexo synth --shards fusion --egonet`")
     window = index["window"]
     n_train = train_data["ego"].shape[0]
     print(f"{args.stage}: {n_train} training windows, {val_data['ego'].shape[0]} validation windows, "
@@ -216,11 +242,13 @@ def main():
     seconds = time.time() - start
     state = {name: m.state_dict() for name, m in modules.items()}
     config = {k: v for k, v in vars(args).items() if not isinstance(v, Path)}
+    config["shards"] = [str(f) for f in args.shards]
     config.update({"window": window, "tracking": index["options"]["tracking"],
                    "max_observers": index["options"]["max_observers"],
                    "gate_features": index["gate_feature_dim"], "trainable_parameters": total_params,
                    "train_seconds": seconds, "train_windows": n_train, "shard_index": {k: index[k] for k in (
-                       "subjects", "windows", "frames_simulated", "options", "egonet_sha256") if k in index}})
+                       "subjects", "windows", "frames_simulated", "options", "egonet_sha256s") if k in index},
+                   "val_egonet_sha256": val_data["index"].get("egonet_sha256")})
     torch.save({"state": state, "config": config}, args.out / f"{args.stage}.pt")
     (args.out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
     print(f"trained {total_params} parameters in {seconds / 60:.1f} min; saved {args.out / (args.stage + '.pt')}")

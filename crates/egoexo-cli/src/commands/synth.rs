@@ -60,14 +60,54 @@ pub struct Args {
     /// Sessions: write folders instead of zip files.
     #[arg(long)]
     pub folders: bool,
+    /// Keep only the clips of fold K of N (`K/N`, K from 0): clip `c` of the library is in
+    /// fold `c mod N`, so a fold keeps whole clips and their mirrored copies together. For
+    /// cross-fitted stage-2 shards (training/README.md).
+    #[arg(long, value_parser = parse_fold, conflicts_with = "exclude_fold")]
+    pub fold: Option<Fold>,
+    /// Drop the clips of fold K of N (`K/N`): the training set of fold K's EgoNet.
+    #[arg(long, value_parser = parse_fold)]
+    pub exclude_fold: Option<Fold>,
+}
+
+/// Fold `index` of `count` of the library's clips (clip `c` is in fold `c mod count`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Fold {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl Fold {
+    fn contains(self, clip: usize) -> bool {
+        clip % self.count == self.index
+    }
+}
+
+fn parse_fold(text: &str) -> Result<Fold, String> {
+    let (k, n) = text.split_once('/').ok_or_else(|| format!("expected K/N (e.g. 0/3), got {text:?}"))?;
+    let index: usize = k.trim().parse().map_err(|_| format!("fold index {k:?} is not a number"))?;
+    let count: usize = n.trim().parse().map_err(|_| format!("fold count {n:?} is not a number"))?;
+    if count < 2 || index >= count {
+        return Err(format!("expected K/N with N >= 2 and 0 <= K < N, got {text:?}"));
+    }
+    Ok(Fold { index, count })
 }
 
 pub fn run(args: Args) -> Result<()> {
     let library =
         egoexo_mocap::fs::open_library(&args.lib).with_context(|| format!("opening {}", args.lib.display()))?;
-    let clips = library.clips_of_subjects(&args.subjects);
+    let mut clips = library.clips_of_subjects(&args.subjects);
     if clips.is_empty() {
         bail!("{} has no clips of subjects {:?} (it has {:?})", args.lib.display(), args.subjects, library.subjects());
+    }
+    if let Some(fold) = args.fold {
+        clips.retain(|&c| fold.contains(c));
+    }
+    if let Some(fold) = args.exclude_fold {
+        clips.retain(|&c| !fold.contains(c));
+    }
+    if clips.is_empty() {
+        bail!("no clips of subjects {:?} are left after the fold selection", args.subjects);
     }
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let tracking = TrackingMode::from(args.tracking);
@@ -141,4 +181,21 @@ pub fn run(args: Args) -> Result<()> {
     bar.finish();
     println!("wrote {} sessions to {}", clips.len(), args.out.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn folds_parse_and_partition_the_clips() {
+        let folds: Vec<Fold> = (0..3).map(|k| parse_fold(&format!("{k}/3")).unwrap()).collect();
+        for clip in 0..30 {
+            assert_eq!(folds.iter().filter(|f| f.contains(clip)).count(), 1, "clip {clip} is in exactly one fold");
+        }
+        assert!(parse_fold("3/3").is_err());
+        assert!(parse_fold("0/1").is_err());
+        assert!(parse_fold("a/3").unwrap_err().contains("\"a\""));
+        assert!(parse_fold("2").unwrap_err().contains("K/N"));
+    }
 }

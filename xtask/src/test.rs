@@ -10,7 +10,12 @@ use crate::cmd::{self, TestCounts};
 use crate::{e2e, tools, web};
 
 /// Crates whose tests also run compiled to wasm32 in headless Chromium.
-const WASM_TEST_CRATES: &[&str] = &["egoexo-core", "egoexo-viewer"];
+const WASM_TEST_CRATES: &[&str] = &["egoexo-core"];
+
+/// Crates whose tests run compiled to wasm32 in headless Chromium with the web app's profile
+/// ([`web::WASM_PROFILE`]) and the features of the app's own build of that crate, so that the
+/// tests and the app share one compiled wgpu.
+const WASM_APP_PROFILE_TEST_CRATES: &[&str] = &["egoexo-viewer"];
 
 /// Single test targets (crate, test) that run compiled to wasm32 in headless Chromium, for
 /// crates whose other tests need native I/O.
@@ -96,6 +101,9 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
             let mut total = TestCounts::default();
             let crates = WASM_TEST_CRATES.iter().map(|krate| vec!["--package", krate]);
             let targets = WASM_TEST_TARGETS.iter().map(|(krate, test)| vec!["--package", krate, "--test", test]);
+            let app_crates = WASM_APP_PROFILE_TEST_CRATES
+                .iter()
+                .map(|krate| vec!["--profile", web::WASM_PROFILE, "--package", krate]);
             let app_targets = std::iter::once(
                 ["--profile", web::WASM_PROFILE]
                     .into_iter()
@@ -103,7 +111,7 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
                     .chain(WASM_APP_PROFILE_TEST_TARGETS.iter().flat_map(|(_, test)| ["--test", test]))
                     .collect::<Vec<_>>(),
             );
-            for selection in crates.chain(targets).chain(app_targets) {
+            for selection in crates.chain(targets).chain(app_crates).chain(app_targets) {
                 let name = format!("wasm tests: {}", selection.join(" "));
                 let counts = phases.time(name, || {
                     cmd::run_tests(

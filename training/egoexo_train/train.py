@@ -83,8 +83,9 @@ def load_shards(folders, keys: list, exclude_fold=None) -> dict:
 
 
 def pose_losses(pred_root, pred_body, target, true_pos, rest, mask):
-    """(root L1, body L1, head-relative position L1 in metres, MPJPE in metres), each a
-    masked mean; `true_pos` are the targets' head-relative joint positions."""
+    """(root L1, body L1, head-relative position L1 in metres, MPJPE in metres, velocity L1 in
+    metres per frame), each a masked mean; `true_pos` are the targets' head-relative joint
+    positions."""
     w = mask.unsqueeze(-1)
     denom = mask.sum().clamp(min=1.0)
     root = ((pred_root - target[..., :6]).abs() * w).sum() / (denom * 6)
@@ -94,7 +95,10 @@ def pose_losses(pred_root, pred_body, target, true_pos, rest, mask):
     err = (pred_pos - true_pos).abs().mean(dim=(-1, -2))
     position = (err * mask).sum() / denom
     mpjpe = (((pred_pos - true_pos) ** 2).sum(-1).sqrt().mean(-1) * mask).sum() / denom
-    return root, body, position, mpjpe
+    pair = mask[:, 1:] * mask[:, :-1]
+    dv = ((pred_pos[:, 1:] - pred_pos[:, :-1]) - (true_pos[:, 1:] - true_pos[:, :-1])).abs().mean(dim=(-1, -2))
+    velocity = (dv * pair).sum() / pair.sum().clamp(min=1.0)
+    return root, body, position, mpjpe, velocity
 
 
 def fusion_inputs(batch, gate_net, train: bool, generator: torch.Generator):
@@ -154,6 +158,8 @@ def main():
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--eval-every", type=int, default=200)
+    parser.add_argument("--velocity-weight", type=float, default=0.0,
+                        help="weight of an L1 loss on frame-to-frame joint displacements (not in the paper; 0 = off)")
     args = parser.parse_args()
 
     torch.manual_seed(args.seed)
@@ -202,7 +208,7 @@ def main():
             for i in range(0, n_val, 64):
                 batch = take(val_data, slice(i, i + 64), keys + BATCH_KEYS_EXTRA)
                 (root, body), _ = forward(batch, False)
-                r, b, p, mpjpe = pose_losses(root, body, batch["target"], batch["target_positions"], batch["rest_joints"], batch["frame_mask"])
+                r, b, p, mpjpe, _ = pose_losses(root, body, batch["target"], batch["target_positions"], batch["rest_joints"], batch["frame_mask"])
                 loss = ROOT_WEIGHT * r + BODY_WEIGHT * b + POSITION_WEIGHT * p
                 w = batch["frame_mask"].sum().item()
                 totals += np.array([loss.item(), r.item(), b.item(), mpjpe.item(), 1.0]) * w
@@ -220,8 +226,8 @@ def main():
     for step in range(1, args.steps + 1):
         batch = take(train_data, next(stream), keys + BATCH_KEYS_EXTRA)
         (root, body), _ = forward(batch, True)
-        r, b, p, _ = pose_losses(root, body, batch["target"], batch["target_positions"], batch["rest_joints"], batch["frame_mask"])
-        loss = ROOT_WEIGHT * r + BODY_WEIGHT * b + POSITION_WEIGHT * p
+        r, b, p, _, v = pose_losses(root, body, batch["target"], batch["target_positions"], batch["rest_joints"], batch["frame_mask"])
+        loss = ROOT_WEIGHT * r + BODY_WEIGHT * b + POSITION_WEIGHT * p + args.velocity_weight * v
         if args.stage == "fusion":
             loss = loss + GATE_AUX_WEIGHT * gate_aux_loss(modules["gate"], batch)
         optimizer.zero_grad(set_to_none=True)

@@ -44,7 +44,21 @@ fn simulate_inspect_reconstruct_and_evaluate() {
 
     // Sessions that inspect accepts.
     let sessions = dir.join("sessions");
-    let out = ok(&["synth", "--lib", &s(&lib), "--subjects", "2", "--observers", "2", "--tracking", "3", "--seed", "7", "-o", &s(&sessions)]);
+    let out = ok(&[
+        "synth",
+        "--lib",
+        &s(&lib),
+        "--subjects",
+        "2",
+        "--observers",
+        "2",
+        "--tracking",
+        "3",
+        "--seed",
+        "7",
+        "-o",
+        &s(&sessions),
+    ]);
     assert!(out.contains("wrote 3 sessions"), "{out}");
     let mut files: Vec<_> = std::fs::read_dir(&sessions).unwrap().map(|e| e.unwrap().path()).collect();
     files.sort();
@@ -61,22 +75,64 @@ fn simulate_inspect_reconstruct_and_evaluate() {
         assert!(out.contains("ego-exo, 3-point"), "{out}");
         assert!(std::fs::metadata(&out_file).unwrap().len() > 1000);
     }
-    let ego_only = ok(&["reconstruct", &s(&files[0]), "-o", &s(&dir.join("ego.csv")), "--models", &fixture_models(), "--ego-only", "--tracking", "1"]);
+    let ego_only = ok(&[
+        "reconstruct",
+        &s(&files[0]),
+        "-o",
+        &s(&dir.join("ego.csv")),
+        "--models",
+        &fixture_models(),
+        "--ego-only",
+        "--tracking",
+        "1",
+    ]);
     assert!(ego_only.contains("ego-only, 1-point"), "{ego_only}");
 
     // Training shards.
     let shards = dir.join("shards");
-    let out = ok(&["synth", "--lib", &s(&lib), "--subjects", "2", "--observers", "3", "--shards", "ego", "--simulations", "1", "-o", &s(&shards)]);
+    let out = ok(&[
+        "synth",
+        "--lib",
+        &s(&lib),
+        "--subjects",
+        "2",
+        "--observers",
+        "3",
+        "--shards",
+        "ego",
+        "--simulations",
+        "1",
+        "-o",
+        &s(&shards),
+    ]);
     assert!(out.contains("windows in"), "{out}");
     assert!(shards.join("index.json").is_file() && shards.join("shard-0000.npz").is_file());
 
     // The evaluation table, with and without networks.
-    let table = ok(&["eval", "--lib", &s(&lib), "--subjects", "9", "--observers", "1", "--tracking", "3", "--seed", "7"]);
-    assert!(table.contains("rest-pose") && table.contains("nearest-neighbour") && table.contains("occluded frames"), "{table}");
-    let json = ok(&["eval", "--lib", &s(&lib), "--subjects", "9", "--observers", "1", "--tracking", "1", "--models", &fixture_models(), "--json"]);
+    let table =
+        ok(&["eval", "--lib", &s(&lib), "--subjects", "9", "--observers", "1", "--tracking", "3", "--seed", "7"]);
+    assert!(
+        table.contains("rest-pose") && table.contains("nearest-neighbour") && table.contains("occluded frames"),
+        "{table}"
+    );
+    let json = ok(&[
+        "eval",
+        "--lib",
+        &s(&lib),
+        "--subjects",
+        "9",
+        "--observers",
+        "1",
+        "--tracking",
+        "1",
+        "--models",
+        &fixture_models(),
+        "--json",
+    ]);
     let report: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert_eq!(report["tracking"], 1);
-    let methods: Vec<_> = report["rows"].as_array().unwrap().iter().map(|r| r["method"].as_str().unwrap().to_string()).collect();
+    let methods: Vec<_> =
+        report["rows"].as_array().unwrap().iter().map(|r| r["method"].as_str().unwrap().to_string()).collect();
     assert_eq!(methods, ["rest-pose", "nearest-neighbour", "ego-only", "ego-exo", "ego-exo-ungated"]);
     assert!(report["occluded_rows"].is_array());
 }

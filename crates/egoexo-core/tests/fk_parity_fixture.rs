@@ -49,8 +49,13 @@ fn fixture() -> serde_json::Value {
                         }
                         six.extend_from_slice(&r);
                     }
-                    let decoded: Vec<Quat> = six.chunks_exact(6).map(|c| Rot6d(c.try_into().unwrap()).to_quat()).collect();
-                    let pose = SmplPose { root_orientation: decoded[0], body: std::array::from_fn(|j| decoded[j + 1]), translation: Vec3::ZERO };
+                    let decoded: Vec<Quat> =
+                        six.chunks_exact(6).map(|c| Rot6d(c.try_into().unwrap()).to_quat()).collect();
+                    let pose = SmplPose {
+                        root_orientation: decoded[0],
+                        body: std::array::from_fn(|j| decoded[j + 1]),
+                        translation: Vec3::ZERO,
+                    };
                     let fk = skeleton.forward_kinematics(&pose);
                     let pelvis = fk.positions[0];
                     let positions: Vec<f32> = fk.positions.iter().flat_map(|p| (*p - pelvis).to_array()).collect();
@@ -75,13 +80,20 @@ fn the_committed_fk_fixture_matches_this_fk() {
         std::fs::write(&path, serde_json::to_string(&current).unwrap()).unwrap();
     }
     let committed: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(&path).expect("fixture missing: run with EGOEXO_REGENERATE_FIXTURES=1")).unwrap();
+        serde_json::from_slice(&std::fs::read(&path).expect("fixture missing: run with EGOEXO_REGENERATE_FIXTURES=1"))
+            .unwrap();
     let flat = |v: &serde_json::Value| -> Vec<f64> {
         v["cases"]
             .as_array()
             .unwrap()
             .iter()
-            .flat_map(|c| c["frames"].as_array().unwrap().iter().flat_map(|f| f["positions"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap())))
+            .flat_map(|c| {
+                c["frames"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .flat_map(|f| f["positions"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()))
+            })
             .collect()
     };
     let (a, b) = (flat(&current), flat(&committed));

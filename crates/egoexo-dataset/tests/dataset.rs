@@ -40,7 +40,12 @@ fn library() -> MotionLibrary {
                     frame_offset: 0,
                     head_height_m: motion.skeleton.head_height(),
                     skeleton_scale: motion.skeleton.head_height() / 1.4963,
-                    retarget: RetargetStats { mean_cm: 0.0, p95_cm: 0.0, max_cm: 0.0, per_joint_mean_cm: vec![0.0; 24] },
+                    retarget: RetargetStats {
+                        mean_cm: 0.0,
+                        p95_cm: 0.0,
+                        max_cm: 0.0,
+                        per_joint_mean_cm: vec![0.0; 24],
+                    },
                 },
                 poses: motion.poses,
                 error_histogram: vec![0; HISTOGRAM_BINS],
@@ -100,13 +105,23 @@ fn ego_shards_count_windows_of_the_chosen_subjects_with_mirrors() {
 #[test]
 fn fusion_shards_need_an_egonet_and_carry_the_exo_side() {
     let lib = library();
-    let err = write_shards(&lib, &[0], ShardStage::Fusion, &ShardOptions::default(), None, &mut |_, _| Ok(()), &mut |_, _| {})
-        .unwrap_err();
+    let err = write_shards(
+        &lib,
+        &[0],
+        ShardStage::Fusion,
+        &ShardOptions::default(),
+        None,
+        &mut |_, _| Ok(()),
+        &mut |_, _| {},
+    )
+    .unwrap_err();
     assert!(err.to_string().contains("trained EgoNet"), "{err}");
 
     let models = fixture_models(TrackingMode::ThreePoint);
-    let (index, files) =
-        make_shards(ShardStage::Fusion, Some(EgoNetForShards { model: &models.egonet, sha256: &models.manifest.egonet.sha256 }));
+    let (index, files) = make_shards(
+        ShardStage::Fusion,
+        Some(EgoNetForShards { model: &models.egonet, sha256: &models.manifest.egonet.sha256 }),
+    );
     assert_eq!(index.egonet_sha256.as_deref(), Some(models.manifest.egonet.sha256.as_str()));
 
     // numpy reads them as the training code does, with the documented shapes and ranges.
@@ -153,18 +168,29 @@ fn python() -> PathBuf {
         return p.into();
     }
     let venv = workspace_root().join("target/py/bin/python");
-    assert!(venv.exists(), "the Python test environment (target/py) is missing: run `cargo xtask setup` (or `cargo xtask test`)");
+    assert!(
+        venv.exists(),
+        "the Python test environment (target/py) is missing: run `cargo xtask setup` (or `cargo xtask test`)"
+    );
     venv
 }
 
 #[test]
 fn evaluation_scores_every_method_on_all_and_occluded_frames() {
     let lib = library();
-    let engine = Engine::new()
-        .with_models(fixture_models(TrackingMode::ThreePoint))
-        .with_nearest_neighbour(TrackingMode::ThreePoint, nearest_neighbour_index(&lib, &[1, 2], TrackingMode::ThreePoint, 7, 2).unwrap());
-    let methods = vec![Method::RestPose, Method::NearestNeighbour, Method::EgoOnly, Method::EgoExo, Method::EgoExoUngated];
-    let options = EvalOptions { subjects: vec![3], observers: 2, tracking: TrackingMode::ThreePoint, seed: 7, methods: methods.clone() };
+    let engine = Engine::new().with_models(fixture_models(TrackingMode::ThreePoint)).with_nearest_neighbour(
+        TrackingMode::ThreePoint,
+        nearest_neighbour_index(&lib, &[1, 2], TrackingMode::ThreePoint, 7, 2).unwrap(),
+    );
+    let methods =
+        vec![Method::RestPose, Method::NearestNeighbour, Method::EgoOnly, Method::EgoExo, Method::EgoExoUngated];
+    let options = EvalOptions {
+        subjects: vec![3],
+        observers: 2,
+        tracking: TrackingMode::ThreePoint,
+        seed: 7,
+        methods: methods.clone(),
+    };
     let report = evaluate(&lib, &engine, &options, &mut |_, _| {}).unwrap();
     assert_eq!(report.clips, 1);
     assert_eq!(report.frames, 195);
@@ -190,7 +216,13 @@ fn evaluation_scores_every_method_on_all_and_occluded_frames() {
 #[test]
 fn unknown_subjects_are_a_clear_error() {
     let lib = library();
-    let options = EvalOptions { subjects: vec![42], observers: 1, tracking: TrackingMode::OnePoint, seed: 1, methods: vec![Method::RestPose] };
+    let options = EvalOptions {
+        subjects: vec![42],
+        observers: 1,
+        tracking: TrackingMode::OnePoint,
+        seed: 1,
+        methods: vec![Method::RestPose],
+    };
     let err = evaluate(&lib, &Engine::new(), &options, &mut |_, _| {}).unwrap_err();
     assert!(err.to_string().contains("no clips of subjects [42]"), "{err}");
 }

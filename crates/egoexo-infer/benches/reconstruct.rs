@@ -28,7 +28,8 @@ fn models_dir() -> PathBuf {
 
 fn engine() -> Engine {
     let dir = models_dir();
-    let manifest = Manifest::from_json(&std::fs::read(dir.join("manifest.json")).expect("manifest")).expect("valid manifest");
+    let manifest =
+        Manifest::from_json(&std::fs::read(dir.join("manifest.json")).expect("manifest")).expect("valid manifest");
     let set = ModelSet::load(manifest.model_set(TrackingMode::ThreePoint).expect("3-point models"), |f| {
         std::fs::read(dir.join(f)).map_err(|e| InferError::ReadModel { file: f.into(), message: e.to_string() })
     })
@@ -37,7 +38,8 @@ fn engine() -> Engine {
 }
 
 fn session(observers: usize) -> AlignedSession {
-    let sim = simulate(&walking_circle(20.0), "bench", &SynthConfig { observers, ..SynthConfig::default() }, 1).expect("simulates");
+    let sim = simulate(&walking_circle(20.0), "bench", &SynthConfig { observers, ..SynthConfig::default() }, 1)
+        .expect("simulates");
     align(&sim.session, &AlignOptions::default()).expect("aligns")
 }
 
@@ -50,9 +52,11 @@ fn reconstruct(c: &mut Criterion) {
         group.throughput(Throughput::Elements(aligned.timeline.frames as u64));
         for method in [Method::EgoOnly, Method::EgoExo] {
             let options = ReconstructOptions { method, ..ReconstructOptions::default() };
-            group.bench_with_input(BenchmarkId::new(method.name(), format!("{observers}-observer")), &aligned, |b, aligned| {
-                b.iter(|| engine.reconstruct(aligned, &options, &mut |_| true).expect("reconstructs"))
-            });
+            group.bench_with_input(
+                BenchmarkId::new(method.name(), format!("{observers}-observer")),
+                &aligned,
+                |b, aligned| b.iter(|| engine.reconstruct(aligned, &options, &mut |_| true).expect("reconstructs")),
+            );
         }
     }
     group.finish();

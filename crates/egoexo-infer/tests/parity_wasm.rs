@@ -70,10 +70,14 @@ fn the_engine_reconstructs_a_simulated_session_in_the_browser() {
     let engine = Engine::new().with_models(models(TrackingMode::ThreePoint));
     let mut windows = 0;
     let r = engine
-        .reconstruct(&aligned, &ReconstructOptions { method: Method::EgoExo, ..ReconstructOptions::default() }, &mut |_| {
-            windows += 1;
-            true
-        })
+        .reconstruct(
+            &aligned,
+            &ReconstructOptions { method: Method::EgoExo, ..ReconstructOptions::default() },
+            &mut |_| {
+                windows += 1;
+                true
+            },
+        )
         .unwrap();
     assert_eq!(r.motion.len(), aligned.timeline.frames);
     assert!(windows > 0 && r.joints.iter().all(|f| f.iter().all(|p| p.is_finite())));

@@ -2,24 +2,11 @@
 //! laid out both ways (the project's `cmu/NN/` and CMU's `all_asfamc/subjects/NN/`).
 //! Skipped, with a message, when `shared/data/cmu` is absent.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
-fn cmu_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("EGOEXO_CMU_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/cmu"));
-    if dir.join("CMU_data.csv").is_file() {
-        Some(dir)
-    } else {
-        eprintln!("SKIPPED: the CMU data is not at {} (set EGOEXO_CMU_DIR)", dir.display());
-        None
-    }
-}
-
-fn egoexo(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_egoexo")).args(args).output().expect("egoexo runs")
-}
+use common::{cmu_dir, egoexo};
 
 fn scratch(name: &str) -> PathBuf {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);

@@ -3,24 +3,11 @@
 //! prints both tables. Networks are the engine's untrained fixture (the numbers are not the
 //! point here; the plumbing is). Skipped, with a message, when `shared/data/cmu` is absent.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn cmu_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("EGOEXO_CMU_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/cmu"));
-    if dir.join("CMU_data.csv").is_file() {
-        Some(dir)
-    } else {
-        eprintln!("SKIPPED: the CMU data is not at {} (set EGOEXO_CMU_DIR)", dir.display());
-        None
-    }
-}
+use std::path::Path;
 
-fn egoexo(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_egoexo")).args(args).output().expect("egoexo runs")
-}
+use common::{cmu_dir, egoexo};
 
 fn ok(args: &[&str]) -> String {
     let out = egoexo(args);

@@ -1,15 +1,15 @@
 //! `egoexo inspect` and `egoexo convert`, run as the real binary on the session fixtures.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 use std::sync::atomic::{AtomicUsize, Ordering};
+
+use common::egoexo;
 
 fn fixtures() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../egoexo-session/tests/fixtures")
-}
-
-fn egoexo(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_egoexo")).args(args).output().unwrap()
 }
 
 fn stdout(o: &Output) -> String {

@@ -30,31 +30,12 @@ pub struct EvalOptions {
     pub methods: Vec<Method>,
 }
 
-/// One table row.
+/// One table row: a method and the core's metric row (flattened in JSON).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EvalRow {
     pub method: Method,
-    pub mpjpe_cm: f64,
-    pub upper_cm: f64,
-    pub lower_cm: f64,
-    pub mpjve_cm_s: f64,
-    /// 10² m/s³.
-    pub jitter: f64,
-    pub frames: usize,
-}
-
-impl EvalRow {
-    fn new(method: Method, m: &MotionMetrics) -> Self {
-        Self {
-            method,
-            mpjpe_cm: m.mpjpe_cm,
-            upper_cm: m.upper_cm,
-            lower_cm: m.lower_cm,
-            mpjve_cm_s: m.mpjve_cm_s,
-            jitter: m.jitter,
-            frames: m.frames,
-        }
-    }
+    #[serde(flatten)]
+    pub metrics: MotionMetrics,
 }
 
 /// The result, in the shape `egoexo eval --json` prints.
@@ -167,7 +148,7 @@ pub fn evaluate(
             .methods
             .iter()
             .zip(accs)
-            .filter_map(|(&method, acc)| acc.finish().map(|m| EvalRow::new(method, &m)))
+            .filter_map(|(&method, acc)| acc.finish().map(|metrics| EvalRow { method, metrics }))
             .collect()
     };
     Ok(EvalReport {
@@ -196,14 +177,15 @@ pub fn format_table(report: &EvalReport) -> String {
         ));
         out.push_str(&format!("{:<20} {:>8} {:>8} {:>8} {:>11} {:>8}\n", "", "cm", "cm", "cm", "cm/s", "1e2m/s3"));
         for r in rows.iter() {
+            let m = &r.metrics;
             out.push_str(&format!(
                 "{:<20} {:>8.2} {:>8.2} {:>8.2} {:>11.2} {:>8.2}\n",
                 r.method.name(),
-                r.mpjpe_cm,
-                r.upper_cm,
-                r.lower_cm,
-                r.mpjve_cm_s,
-                r.jitter
+                m.mpjpe_cm,
+                m.upper_cm,
+                m.lower_cm,
+                m.mpjve_cm_s,
+                m.jitter
             ));
         }
     }

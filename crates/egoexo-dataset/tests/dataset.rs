@@ -196,11 +196,11 @@ fn evaluation_scores_every_method_on_all_and_occluded_frames() {
     assert_eq!(report.frames, 195);
     assert_eq!(report.rows.iter().map(|r| r.method).collect::<Vec<_>>(), methods);
     for row in report.rows.iter().chain(&report.occluded_rows) {
-        assert!(row.mpjpe_cm.is_finite() && row.mpjpe_cm > 0.0, "{row:?}");
-        assert!(row.jitter.is_finite());
+        assert!(row.metrics.mpjpe_cm.is_finite() && row.metrics.mpjpe_cm > 0.0, "{row:?}");
+        assert!(row.metrics.jitter.is_finite());
     }
     // The nearest neighbour of a walk among walks beats a T-pose.
-    let mpjpe = |m: Method| report.rows.iter().find(|r| r.method == m).unwrap().mpjpe_cm;
+    let mpjpe = |m: Method| report.rows.iter().find(|r| r.method == m).unwrap().metrics.mpjpe_cm;
     assert!(mpjpe(Method::NearestNeighbour) < mpjpe(Method::RestPose));
     // Same seed, same numbers.
     assert_eq!(report, evaluate(&lib, &engine, &options, &mut |_, _| {}).unwrap());

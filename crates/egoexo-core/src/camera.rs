@@ -442,6 +442,61 @@ impl CameraCalibration {
     }
 }
 
+pub mod aria_rgb {
+    //! Project Aria's RGB camera as a preset: a real factory calibration at 1408×1408 and the
+    //! camera's mounting on a CPF head device (+X left, +Y up, +Z forward).
+
+    use glam::{Quat, Vec3};
+
+    use super::{CameraCalibration, CameraError, Fisheye624, Projection};
+    use crate::rigid::RigidTransform;
+
+    /// Fisheye624 parameters `[f, cu, cv, k0..k5, p0, p1, s0..s3]` at 1408×1408 (pixels).
+    pub const PARAMS_1408: [f32; 15] = [
+        610.941,
+        715.115,
+        716.715,
+        0.406036,
+        -0.489948,
+        0.174565,
+        1.13298,
+        -1.70164,
+        0.651156,
+        0.000621147,
+        1.9322e-05,
+        -1.48553e-05,
+        0.000260123,
+        -0.000658211,
+        3.7614e-05,
+    ];
+
+    /// Radius of the image circle at 1408 px (pixels from the principal point).
+    pub const VALID_RADIUS_1408: f32 = 700.0;
+
+    /// `T_device_camera` on a CPF device: the RGB camera on the left temple, an OpenCV camera
+    /// (+X right, +Y down, the CPF frame turned 180° about Z) facing forward, tilted 11° down
+    /// (metres).
+    pub fn t_device_camera() -> RigidTransform {
+        RigidTransform::new(
+            Quat::from_rotation_z(std::f32::consts::PI) * Quat::from_rotation_x(-0.2),
+            Vec3::new(0.05, 0.012, 0.006),
+        )
+    }
+
+    /// The RGB camera at `size × size` pixels (1408 or 2880 on the device), with its valid
+    /// radius.
+    pub fn camera(size: u32) -> Result<CameraCalibration, CameraError> {
+        let base = CameraCalibration::new(
+            Projection::Fisheye624(Fisheye624::new(PARAMS_1408)?),
+            1408,
+            1408,
+            t_device_camera(),
+        )?
+        .with_valid_radius(VALID_RADIUS_1408);
+        if size == 1408 { Ok(base) } else { base.scaled_to(size, size) }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -6,34 +6,9 @@ use egoexo_core::glam::{Quat, Vec3};
 use egoexo_core::rigid::RigidTransform;
 use proptest::prelude::*;
 
-/// Project Aria RGB camera intrinsics at 1408×1408 (a real factory calibration's
-/// `FisheyeRadTanThinPrism` parameters `[f, cu, cv, k0..k5, p0, p1, s0..s3]`).
-pub const ARIA_RGB_1408: [f32; 15] = [
-    610.941,
-    715.115,
-    716.715,
-    0.406036,
-    -0.489948,
-    0.174565,
-    1.13298,
-    -1.70164,
-    0.651156,
-    0.000621147,
-    1.9322e-05,
-    -1.48553e-05,
-    0.000260123,
-    -0.000658211,
-    3.7614e-05,
-];
-
-/// The RGB camera's pose on a CPF head device (+X left, +Y up, +Z forward): an OpenCV camera
-/// (+X right, +Y down) facing forward and tilted 11° down, mounted on the left temple.
-pub fn aria_rgb_t_device_camera() -> RigidTransform {
-    RigidTransform::new(
-        Quat::from_rotation_z(std::f32::consts::PI) * Quat::from_rotation_x(-0.2),
-        Vec3::new(0.05, 0.012, 0.006),
-    )
-}
+/// Project Aria RGB camera intrinsics at 1408×1408 (the core's preset).
+pub use egoexo_core::camera::aria_rgb::PARAMS_1408 as ARIA_RGB_1408;
+pub use egoexo_core::camera::aria_rgb::t_device_camera as aria_rgb_t_device_camera;
 
 /// Aria RGB at 1408² with a CPF-consistent extrinsic.
 pub fn aria_rgb_camera() -> CameraCalibration {

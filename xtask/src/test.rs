@@ -72,7 +72,40 @@ impl Phases {
     }
 }
 
+/// Free disk a clean `cargo xtask test` needs, in GiB (target/ plus the torch venv, measured
+/// on a clean clone, with headroom).
+const DISK_NEEDED_GIB: f64 = 16.0;
+
+/// Free space, in GiB, on the file system holding `path` (from POSIX `df -Pk`), or `None` where
+/// `df` is missing or prints something else.
+fn free_disk_gib(path: &Path) -> Option<f64> {
+    parse_df_available_gib(&cmd::output(Command::new("df").arg("-Pk").arg(path))?)
+}
+
+/// The "Available" column (KiB) of `df -Pk`'s one data line, in GiB.
+fn parse_df_available_gib(df_output: &str) -> Option<f64> {
+    let line = df_output.lines().nth(1)?;
+    let available_kib: f64 = line.split_whitespace().nth(3)?.parse().ok()?;
+    Some(available_kib / (1024.0 * 1024.0))
+}
+
+/// Says up front when the disk is too small for a clean run: otherwise the first sign is the
+/// linker dying with a bus error half an hour in.
+fn warn_if_disk_low(root: &Path) {
+    if let Some(free) = free_disk_gib(root)
+        && free < DISK_NEEDED_GIB
+    {
+        eprintln!(
+            "[xtask] warning: {free:.1} GiB free on the disk holding {}; a clean test run needs about \
+                 {DISK_NEEDED_GIB:.0} GiB (target/ and the training venv). A linker 'Bus error' or \
+                 'No space left on device' below means the disk filled up.",
+            root.display()
+        );
+    }
+}
+
 pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
+    warn_if_disk_low(root);
     let mut phases = Phases::default();
     // Install first, so a missing tool fails fast rather than after the native tests.
     let (browser, native_tools) = phases.time("tools (install or check)", || {
@@ -189,4 +222,18 @@ fn write_webdriver_json(root: &Path, chromium: &Path) -> Result<std::path::PathB
     std::fs::write(&path, serde_json::to_string_pretty(&caps)?)
         .with_context(|| format!("writing {}", path.display()))?;
     Ok(path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_df_available_gib;
+
+    #[test]
+    fn reads_the_available_column_of_posix_df() {
+        let out = "Filesystem     1024-blocks      Used Available Capacity Mounted on\n\
+                   /dev/vda         264191980  42991756  53477376      45% /";
+        let gib = parse_df_available_gib(out).unwrap();
+        assert!((gib - 53_477_376.0 / 1_048_576.0).abs() < 1e-9, "{gib}");
+        assert_eq!(parse_df_available_gib("df: /nowhere: No such file or directory"), None);
+    }
 }

@@ -24,6 +24,7 @@ import json
 import math
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -82,10 +83,23 @@ def load_shards(folders, keys: list, exclude_fold=None) -> dict:
     return data
 
 
-def pose_losses(pred_root, pred_body, target, true_pos, rest, mask):
-    """(root L1, body L1, head-relative position L1 in metres, MPJPE in metres, velocity L1 in
-    metres per frame), each a masked mean; `true_pos` are the targets' head-relative joint
-    positions."""
+class PoseLosses(NamedTuple):
+    """Masked means over a batch of windows; positions head-relative, in metres."""
+
+    root: torch.Tensor
+    body: torch.Tensor
+    position: torch.Tensor
+    mpjpe: torch.Tensor
+    #: L1 on frame-to-frame joint displacements (m / frame).
+    velocity: torch.Tensor
+    #: L1 on second differences of joint positions (m / frame^2).
+    acceleration: torch.Tensor
+
+
+def pose_losses(pred_root, pred_body, target, true_pos, rest, mask) -> PoseLosses:
+    """Root and body 6D L1, FK position L1, MPJPE, and the velocity and acceleration L1 of the
+    predicted joint trajectories against the targets'; `true_pos` are the targets' head-relative
+    joint positions, `mask [B,T]` the real frames."""
     w = mask.unsqueeze(-1)
     denom = mask.sum().clamp(min=1.0)
     root = ((pred_root - target[..., :6]).abs() * w).sum() / (denom * 6)
@@ -96,13 +110,18 @@ def pose_losses(pred_root, pred_body, target, true_pos, rest, mask):
     position = (err * mask).sum() / denom
     mpjpe = (((pred_pos - true_pos) ** 2).sum(-1).sqrt().mean(-1) * mask).sum() / denom
     pair = mask[:, 1:] * mask[:, :-1]
-    dv = ((pred_pos[:, 1:] - pred_pos[:, :-1]) - (true_pos[:, 1:] - true_pos[:, :-1])).abs().mean(dim=(-1, -2))
+    pred_vel, true_vel = pred_pos[:, 1:] - pred_pos[:, :-1], true_pos[:, 1:] - true_pos[:, :-1]
+    dv = (pred_vel - true_vel).abs().mean(dim=(-1, -2))
     velocity = (dv * pair).sum() / pair.sum().clamp(min=1.0)
-    return root, body, position, mpjpe, velocity
+    triple = pair[:, 1:] * pair[:, :-1]
+    da = ((pred_vel[:, 1:] - pred_vel[:, :-1]) - (true_vel[:, 1:] - true_vel[:, :-1])).abs().mean(dim=(-1, -2))
+    acceleration = (da * triple).sum() / triple.sum().clamp(min=1.0)
+    return PoseLosses(root, body, position, mpjpe, velocity, acceleration)
 
 
-def fusion_inputs(batch, gate_net, train: bool, generator: torch.Generator):
-    """Gate, observer dropout and gate dropout -> (exo tokens, observer mask, gate values)."""
+def fusion_inputs(batch, gate_net, train: bool, generator: torch.Generator, gate_dropout: float = 0.25):
+    """Gate, observer dropout and gate dropout (the gate replaced by the validity mask for a
+    `gate_dropout` fraction of training windows) -> (exo tokens, observer mask, gate values)."""
     valid = batch["ray_valid"]
     gate = gate_net(batch["gate_features"]) * valid
     mask = batch["observer_mask"].clone()
@@ -111,7 +130,7 @@ def fusion_inputs(batch, gate_net, train: bool, generator: torch.Generator):
         drop_all = torch.rand(b, 1, 1, generator=generator) < 0.15
         drop_one = torch.rand(b, 1, n, generator=generator) < 0.15
         mask = mask * (~(drop_all | drop_one)).float()
-        ungated = (torch.rand(b, 1, 1, 1, generator=generator) < 0.25).float()
+        ungated = (torch.rand(b, 1, 1, 1, generator=generator) < gate_dropout).float()
         gate = ungated * valid + (1.0 - ungated) * gate
     gate = gate * mask.unsqueeze(-1)
     exo = torch.cat([batch["rays"] * gate.unsqueeze(-1), gate.unsqueeze(-1)], dim=-1)
@@ -160,6 +179,10 @@ def main():
     parser.add_argument("--eval-every", type=int, default=200)
     parser.add_argument("--velocity-weight", type=float, default=0.0,
                         help="weight of an L1 loss on frame-to-frame joint displacements (not in the paper; 0 = off)")
+    parser.add_argument("--acceleration-weight", type=float, default=0.0,
+                        help="weight of an L1 loss on second differences of joint positions (not in the paper; 0 = off)")
+    parser.add_argument("--gate-dropout", type=float, default=0.25,
+                        help="stage 2: fraction of training windows whose gate is replaced by the validity mask")
     args = parser.parse_args()
 
     torch.manual_seed(args.seed)
@@ -196,7 +219,7 @@ def main():
     def forward(batch, train):
         if args.stage == "ego":
             return modules["egonet"](batch["ego"]), None
-        exo, mask, gate = fusion_inputs(batch, modules["gate"], train, generator)
+        exo, mask, gate = fusion_inputs(batch, modules["gate"], train, generator, args.gate_dropout)
         return modules["fusion"](batch["ego"], batch["egonet"], exo, mask), gate
 
     def evaluate():
@@ -208,10 +231,10 @@ def main():
             for i in range(0, n_val, 64):
                 batch = take(val_data, slice(i, i + 64), keys + BATCH_KEYS_EXTRA)
                 (root, body), _ = forward(batch, False)
-                r, b, p, mpjpe, _ = pose_losses(root, body, batch["target"], batch["target_positions"], batch["rest_joints"], batch["frame_mask"])
-                loss = ROOT_WEIGHT * r + BODY_WEIGHT * b + POSITION_WEIGHT * p
+                ls = pose_losses(root, body, batch["target"], batch["target_positions"], batch["rest_joints"], batch["frame_mask"])
+                loss = ROOT_WEIGHT * ls.root + BODY_WEIGHT * ls.body + POSITION_WEIGHT * ls.position
                 w = batch["frame_mask"].sum().item()
-                totals += np.array([loss.item(), r.item(), b.item(), mpjpe.item(), 1.0]) * w
+                totals += np.array([loss.item(), ls.root.item(), ls.body.item(), ls.mpjpe.item(), 1.0]) * w
         for m in modules.values():
             m.train()
         return totals[:4] / max(totals[4], 1.0)
@@ -226,8 +249,9 @@ def main():
     for step in range(1, args.steps + 1):
         batch = take(train_data, next(stream), keys + BATCH_KEYS_EXTRA)
         (root, body), _ = forward(batch, True)
-        r, b, p, _, v = pose_losses(root, body, batch["target"], batch["target_positions"], batch["rest_joints"], batch["frame_mask"])
-        loss = ROOT_WEIGHT * r + BODY_WEIGHT * b + POSITION_WEIGHT * p + args.velocity_weight * v
+        ls = pose_losses(root, body, batch["target"], batch["target_positions"], batch["rest_joints"], batch["frame_mask"])
+        loss = (ROOT_WEIGHT * ls.root + BODY_WEIGHT * ls.body + POSITION_WEIGHT * ls.position
+                + args.velocity_weight * ls.velocity + args.acceleration_weight * ls.acceleration)
         if args.stage == "fusion":
             loss = loss + GATE_AUX_WEIGHT * gate_aux_loss(modules["gate"], batch)
         optimizer.zero_grad(set_to_none=True)

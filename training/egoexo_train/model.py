@@ -126,10 +126,17 @@ class Fusion(nn.Module):
     EgoNet's coarse pose, so with every observer masked it refines the ego-only estimate."""
 
     def __init__(self, frames: int = 96, hidden: int = 128, heads: int = 4, spatial_layers: int = 2,
-                 temporal_layers: int = 3, dropout: float = 0.1):
+                 temporal_layers: int = 3, dropout: float = 0.1, exo_embed: str = "linear"):
         super().__init__()
         self.ego_token = nn.Linear(EGO_DIM + POSE_DIM, hidden)
-        self.exo_token = nn.Linear(K * EXO_TOKEN_DIM, hidden)
+        # The paper projects the rays linearly; "mlp" adds a hidden layer (same width) so each
+        # observer's 13 rays are combined non-linearly before the spatial transformer.
+        if exo_embed == "linear":
+            self.exo_token = nn.Linear(K * EXO_TOKEN_DIM, hidden)
+        elif exo_embed == "mlp":
+            self.exo_token = mlp(K * EXO_TOKEN_DIM, hidden, hidden)
+        else:
+            raise ValueError(f"exo_embed must be 'linear' or 'mlp', got {exo_embed!r}")
         self.token_type = nn.Parameter(torch.zeros(2, hidden))
         self.spatial = nn.ModuleList([EncoderLayer(hidden, heads, 2 * hidden, dropout) for _ in range(spatial_layers)])
         self.temporal_positions = nn.Parameter(torch.zeros(frames, hidden))

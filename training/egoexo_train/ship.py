@@ -59,7 +59,7 @@ def main():
     gate = Gate(config["gate_features"], config["gate_hidden"])
     gate.load_state_dict(state["gate"])
     fusion = Fusion(config["window"], config["hidden"], config["heads"], config["spatial_layers"],
-                    config["temporal_layers"], dropout=0.0)
+                    config["temporal_layers"], dropout=0.0, exo_embed=config.get("exo_embed", "linear"))
     fusion.load_state_dict(state["fusion"])
     points = 3 if config["tracking"] == "three_point" else 1
     if ego_config["tracking"] != config["tracking"]:

@@ -171,6 +171,8 @@ def main():
     parser.add_argument("--spatial-layers", type=int, default=2)
     parser.add_argument("--temporal-layers", type=int, default=3)
     parser.add_argument("--gate-hidden", type=int, default=128)
+    parser.add_argument("--exo-embed", choices=["linear", "mlp"], default="linear",
+                        help="exo token projection: linear (the paper) or a two-layer MLP")
     parser.add_argument("--steps", type=int, default=3000)
     parser.add_argument("--batch", type=int, default=32)
     parser.add_argument("--lr", type=float, default=1e-3)
@@ -208,7 +210,8 @@ def main():
         n = train_data["observer_mask"].shape[-1]
         features = train_data["gate_features"].shape[-1]
         gate_net = Gate(features, args.gate_hidden)
-        fusion = Fusion(window, args.hidden, args.heads, args.spatial_layers, args.temporal_layers)
+        fusion = Fusion(window, args.hidden, args.heads, args.spatial_layers, args.temporal_layers,
+                        exo_embed=args.exo_embed)
         modules.update({"gate": gate_net, "fusion": fusion})
         params = list(gate_net.parameters()) + list(fusion.parameters())
     total_params = sum(p.numel() for p in params)

@@ -1,6 +1,7 @@
 """The networks keep the tensor contract the Rust engine relies on
 (crates/egoexo-infer/src/inputs.rs): shapes, the residual on EgoNet's coarse pose, masking."""
 
+import pytest
 import torch
 
 from egoexo_train.model import EgoNet, Fusion, Gate
@@ -15,9 +16,10 @@ def test_shapes_and_gate_range():
     assert gate.shape == (2, 96, 3, 13) and (gate >= 0).all() and (gate <= 1).all()
 
 
-def test_masked_observers_do_not_change_the_output():
+@pytest.mark.parametrize("exo_embed", ["linear", "mlp"])
+def test_masked_observers_do_not_change_the_output(exo_embed):
     torch.manual_seed(1)
-    fusion = Fusion(96, 32, 4, 1, 1, dropout=0.0).eval()
+    fusion = Fusion(96, 32, 4, 1, 1, dropout=0.0, exo_embed=exo_embed).eval()
     ego, egonet = torch.randn(1, 96, 60), torch.randn(1, 96, 132)
     exo = torch.randn(1, 96, 3, 13, 4)
     mask = torch.tensor([1.0, 0.0, 0.0]).expand(1, 96, 3).clone()

@@ -171,6 +171,7 @@ def main():
     parser.add_argument("--spatial-layers", type=int, default=2)
     parser.add_argument("--temporal-layers", type=int, default=3)
     parser.add_argument("--gate-hidden", type=int, default=128)
+    parser.add_argument("--dropout", type=float, default=0.1, help="fusion transformer dropout")
     parser.add_argument("--exo-embed", choices=["linear", "mlp"], default="linear",
                         help="exo token projection: linear (the paper) or a two-layer MLP")
     parser.add_argument("--steps", type=int, default=3000)
@@ -211,7 +212,7 @@ def main():
         features = train_data["gate_features"].shape[-1]
         gate_net = Gate(features, args.gate_hidden)
         fusion = Fusion(window, args.hidden, args.heads, args.spatial_layers, args.temporal_layers,
-                        exo_embed=args.exo_embed)
+                        dropout=args.dropout, exo_embed=args.exo_embed)
         modules.update({"gate": gate_net, "fusion": fusion})
         params = list(gate_net.parameters()) + list(fusion.parameters())
     total_params = sum(p.numel() for p in params)

@@ -1,4 +1,4 @@
-//! A small static file server for `dist/` (tiny_http): correct media types (`application/wasm`
+//! A small static file server for `dist/` (axum): correct media types (`application/wasm`
 //! for streaming compilation, `text/javascript` for modules), no caching (a rebuilt app is
 //! picked up on reload), nothing outside the folder.
 
@@ -6,8 +6,12 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
-use anyhow::{Result, anyhow};
-use tiny_http::{Header, Method, Request, Response, Server, StatusCode};
+use anyhow::{Context, Result};
+use axum::Router;
+use axum::extract::State;
+use axum::http::{Method, StatusCode, Uri, header};
+use axum::response::{IntoResponse, Response};
+use tokio::sync::oneshot;
 
 /// Media type by file extension.
 pub fn content_type(path: &Path) -> &'static str {
@@ -46,37 +50,27 @@ fn resolve(root: &Path, url: &str) -> Option<PathBuf> {
     Some(out)
 }
 
-fn header(name: &str, value: &str) -> Header {
-    Header::from_bytes(name.as_bytes(), value.as_bytes()).expect("ASCII header")
-}
-
-fn respond(root: &Path, request: Request) {
-    let found = match request.method() {
-        Method::Get | Method::Head => resolve(root, request.url()).filter(|p| p.is_file()),
-        _ => None,
+/// `GET`/`HEAD` of a file under `root`, with its media type; 404 for anything else there is.
+async fn serve_file(State(root): State<Arc<PathBuf>>, method: Method, uri: Uri) -> Response {
+    if method != Method::GET && method != Method::HEAD {
+        return (StatusCode::METHOD_NOT_ALLOWED, "method not allowed").into_response();
+    }
+    let Some(path) = resolve(&root, uri.path()) else {
+        return (StatusCode::NOT_FOUND, "not found").into_response();
     };
-    let result = match found.and_then(|path| std::fs::File::open(&path).ok().map(|f| (path, f))) {
-        Some((path, file)) => {
-            let response = Response::from_file(file)
-                .with_header(header("Content-Type", content_type(&path)))
-                .with_header(header("Cache-Control", "no-cache"));
-            request.respond(response)
+    match tokio::fs::read(&path).await {
+        Ok(bytes) => {
+            ([(header::CONTENT_TYPE, content_type(&path)), (header::CACHE_CONTROL, "no-cache")], bytes).into_response()
         }
-        None => {
-            let status = if matches!(request.method(), Method::Get | Method::Head) { 404 } else { 405 };
-            request.respond(Response::from_string("not found").with_status_code(StatusCode(status)))
-        }
-    };
-    if let Err(e) = result {
-        eprintln!("serve: {e}");
+        Err(_) => (StatusCode::NOT_FOUND, "not found").into_response(),
     }
 }
 
 /// A running server; stops when dropped.
 pub struct Running {
     pub url: String,
-    server: Arc<Server>,
-    threads: Vec<JoinHandle<()>>,
+    stop: Option<oneshot::Sender<()>>,
+    thread: Option<JoinHandle<()>>,
 }
 
 impl std::fmt::Debug for Running {
@@ -87,31 +81,39 @@ impl std::fmt::Debug for Running {
 
 impl Drop for Running {
     fn drop(&mut self) {
-        for _ in &self.threads {
-            self.server.unblock();
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
         }
-        for t in self.threads.drain(..) {
-            let _ = t.join();
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
         }
     }
 }
 
-/// Serves `root` on `addr` (`127.0.0.1:0` picks a free port) from a few threads.
+/// Serves `root` on `addr` (`127.0.0.1:0` picks a free port) from its own thread (axum on a
+/// two-thread tokio runtime; every connection is its own task, so a browser's parallel and
+/// kept-alive connections never wait on each other).
 pub fn spawn(root: &Path, addr: &str) -> Result<Running> {
-    let server = Arc::new(Server::http(addr).map_err(|e| anyhow!("cannot listen on {addr}: {e}"))?);
-    let url = format!("http://{}/", server.server_addr());
-    let threads = (0..4)
-        .map(|_| {
-            let server = Arc::clone(&server);
-            let root = root.to_path_buf();
-            std::thread::spawn(move || {
-                while let Ok(request) = server.recv() {
-                    respond(&root, request);
+    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
+    let listener =
+        runtime.block_on(tokio::net::TcpListener::bind(addr)).with_context(|| format!("cannot listen on {addr}"))?;
+    let url = format!("http://{}/", listener.local_addr()?);
+    let app = Router::new().fallback(serve_file).with_state(Arc::new(root.to_path_buf()));
+    let (stop, stopped) = oneshot::channel::<()>();
+    let thread = std::thread::spawn(move || {
+        runtime.block_on(async move {
+            tokio::select! {
+                result = axum::serve(listener, app) => {
+                    if let Err(e) = result {
+                        eprintln!("serve: {e}");
+                    }
                 }
-            })
-        })
-        .collect();
-    Ok(Running { url, server, threads })
+                _ = stopped => {}
+            }
+        });
+        // Dropping the runtime here cancels the connections still open (kept-alive ones).
+    });
+    Ok(Running { url, stop: Some(stop), thread: Some(thread) })
 }
 
 #[cfg(test)]
@@ -153,8 +155,12 @@ mod tests {
             let split = raw.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
             let head = String::from_utf8_lossy(&raw[..split]).to_string();
             let status = head.split_whitespace().nth(1).unwrap().parse().unwrap();
-            let content_type =
-                head.lines().find_map(|l| l.strip_prefix("Content-Type: ")).unwrap_or_default().to_string();
+            // Header names are case-insensitive (hyper writes them in lower case).
+            let content_type = head
+                .lines()
+                .find_map(|l| l.split_once(':').filter(|(name, _)| name.eq_ignore_ascii_case("content-type")))
+                .map(|(_, value)| value.trim().to_string())
+                .unwrap_or_default();
             (status, content_type, raw[split + 4..].to_vec())
         };
         assert_eq!(get("/"), (200, "text/html; charset=utf-8".into(), b"<!doctype html>".to_vec()));

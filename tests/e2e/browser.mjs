@@ -55,9 +55,17 @@ export async function openApp(browser, query = '', { path = '', setup } = {}) {
     context,
     errors,
     // Waits until <body data-state> is one of `states`.
+    // On a timeout, says where the app stood (state and progress line) and what it logged.
     async waitState(states, timeout = 600_000) {
       const list = [].concat(states);
-      await page.waitForFunction((l) => l.includes(document.body.dataset.state), list, { timeout, polling: 100 });
+      try {
+        await page.waitForFunction((l) => l.includes(document.body.dataset.state), list, { timeout, polling: 100 });
+      } catch (error) {
+        const where = await page
+          .evaluate(() => `state ${document.body.dataset.state}, progress "${document.getElementById('progress-text')?.textContent}"`)
+          .catch(() => 'page gone');
+        throw new Error(`waiting for state ${list.join('/')}: ${error.message} (${where}; errors: ${JSON.stringify(errors)})`);
+      }
       return page.evaluate(() => document.body.dataset.state);
     },
     text: (selector) => page.locator(selector).innerText(),

@@ -34,6 +34,8 @@ from .rotations import forward_kinematics
 
 HEAD_JOINT = 15
 ROOT_WEIGHT, BODY_WEIGHT, POSITION_WEIGHT, GATE_AUX_WEIGHT = 0.02, 1.0, 1.0, 0.1
+#: Fraction of stage-2 training windows whose gate is replaced by the validity mask.
+GATE_DROPOUT = 0.25
 
 EGO_KEYS = ["ego", "target", "frame_mask", "rest_joints"]
 BATCH_KEYS_EXTRA = ["target_positions"]
@@ -119,7 +121,8 @@ def pose_losses(pred_root, pred_body, target, true_pos, rest, mask) -> PoseLosse
     return PoseLosses(root, body, position, mpjpe, velocity, acceleration)
 
 
-def fusion_inputs(batch, gate_net, train: bool, generator: torch.Generator, gate_dropout: float = 0.25):
+def fusion_inputs(batch, gate_net, train: bool, generator: torch.Generator,
+                  gate_dropout: float = GATE_DROPOUT):
     """Gate, observer dropout and gate dropout (the gate replaced by the validity mask for a
     `gate_dropout` fraction of training windows) -> (exo tokens, observer mask, gate values)."""
     valid = batch["ray_valid"]
@@ -184,7 +187,7 @@ def main():
                         help="weight of an L1 loss on frame-to-frame joint displacements (not in the paper; 0 = off)")
     parser.add_argument("--acceleration-weight", type=float, default=0.0,
                         help="weight of an L1 loss on second differences of joint positions (not in the paper; 0 = off)")
-    parser.add_argument("--gate-dropout", type=float, default=0.25,
+    parser.add_argument("--gate-dropout", type=float, default=GATE_DROPOUT,
                         help="stage 2: fraction of training windows whose gate is replaced by the validity mask")
     args = parser.parse_args()
 

@@ -93,9 +93,18 @@ pub fn run_bench(root: &Path, run: &BrowserRun, runs: u32) -> Result<BenchResult
     let server = serve::spawn(&root.join("dist"), "127.0.0.1:0")?;
     let script = root.join("tests").join("e2e").join("bench.mjs");
     let out = cmd::output_checked(run.node(root, &server.url).arg(&script).arg(runs.to_string()))?;
-    let line = out.lines().rev().find_map(|l| l.strip_prefix("BENCH ")).context("the bench printed no BENCH line")?;
-    let v: serde_json::Value = serde_json::from_str(line).with_context(|| format!("bench result `{line}`"))?;
-    let number = |k: &str| v[k].as_f64().with_context(|| format!("bench result has no `{k}`: {line}"));
+    parse_bench_line(&out, "BENCH")
+}
+
+/// The last `<prefix> {json}` line of a bench's output as a [`BenchResult`].
+fn parse_bench_line(out: &str, prefix: &str) -> Result<BenchResult> {
+    let line = out
+        .lines()
+        .rev()
+        .find_map(|l| l.strip_prefix(prefix).and_then(|rest| rest.strip_prefix(' ')))
+        .with_context(|| format!("the bench printed no {prefix} line"))?;
+    let v: serde_json::Value = serde_json::from_str(line).with_context(|| format!("{prefix} result `{line}`"))?;
+    let number = |k: &str| v[k].as_f64().with_context(|| format!("{prefix} result has no `{k}`: {line}"));
     Ok(BenchResult {
         frames: number("frames")? as u64,
         runs: number("runs")? as u64,
@@ -117,21 +126,24 @@ pub fn run_native_reference(root: &Path, models: &Path, runs: u32) -> Result<Ben
             .arg(&sample)
             .arg(runs.to_string()),
     )?;
-    let line =
-        out.lines().rev().find_map(|l| l.strip_prefix("BENCH_NATIVE ")).context("no BENCH_NATIVE line printed")?;
-    let v: serde_json::Value = serde_json::from_str(line).with_context(|| format!("native bench result `{line}`"))?;
-    let number = |k: &str| v[k].as_f64().with_context(|| format!("native bench result has no `{k}`: {line}"));
-    Ok(BenchResult {
-        frames: number("frames")? as u64,
-        runs: number("runs")? as u64,
-        median_fps: number("median_fps")?,
-        median_app_fps: number("median_app_fps")?,
-    })
+    parse_bench_line(&out, "BENCH_NATIVE")
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bench_lines_parse_by_their_own_prefix() {
+        let out = "warm-up\nBENCH_NATIVE {\"frames\": 10, \"runs\": 3, \"median_fps\": 5.5, \"median_app_fps\": 2}\n\
+                   BENCH {\"frames\": 1161, \"runs\": 3, \"median_fps\": 4013.0, \"median_app_fps\": 2095.0}\n";
+        let web = parse_bench_line(out, "BENCH").unwrap();
+        assert_eq!((web.frames, web.runs, web.median_fps, web.median_app_fps), (1161, 3, 4013.0, 2095.0));
+        let native = parse_bench_line(out, "BENCH_NATIVE").unwrap();
+        assert_eq!((native.frames, native.median_fps), (10, 5.5));
+        assert!(parse_bench_line("BENCH {\"frames\": 1}", "BENCH").is_err());
+        assert!(parse_bench_line("nothing", "BENCH").is_err());
+    }
 
     #[test]
     fn counts_from_the_tap_summary() {

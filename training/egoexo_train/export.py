@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .model import EGO_DIM, EXO_TOKEN_DIM, K, POSE_DIM, EgoNet, Fusion, Gate
+from .model import EGO_DIM, EXO_TOKEN_DIM, EXO_TOKEN_LAYOUT_VERSION, K, POSE_DIM, EgoNet, Fusion, Gate
 
 WINDOW = 96
 OPSET = 17
@@ -80,6 +80,7 @@ def export_model_set(egonet: EgoNet, gate: Gate, fusion: Fusion, points: int, ma
         "ego_feature_layout": {"version": EGO_LAYOUT_VERSION, "dim": EGO_DIM, "tracking": tracking,
                                "wrists_present": points == 3},
         "gate_feature_layout": {"version": GATE_LAYOUT_VERSION, "dim": GATE_FEATURE_DIM, "context_dim": 0},
+        "exo_token_layout": {"version": EXO_TOKEN_LAYOUT_VERSION, "dim": EXO_TOKEN_DIM},
         "max_observers": max_observers,
         "hidden_dim": hidden,
         **entries,

@@ -84,7 +84,9 @@ def main():
                                                "trainable_parameters", "train_windows")},
         "fusion": {k: config[k] for k in ("steps", "batch", "lr", "seed", "hidden", "heads", "spatial_layers",
                                           "temporal_layers", "gate_hidden", "train_seconds", "trainable_parameters",
-                                          "train_windows")},
+                                          "train_windows")}
+                   | {k: config.get(k) for k in ("velocity_weight", "acceleration_weight", "gate_dropout", "dropout",
+                                                 "exo_embed")},
         "shards": config["shard_index"],
         "commit": git_commit(),
     }

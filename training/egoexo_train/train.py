@@ -39,7 +39,9 @@ GATE_DROPOUT = 0.25
 
 EGO_KEYS = ["ego", "target", "frame_mask", "rest_joints"]
 BATCH_KEYS_EXTRA = ["target_positions"]
-FUSION_KEYS = EGO_KEYS + ["egonet", "rays", "ray_valid", "gate_features", "observer_mask", "occluded"]
+#: The shard format this code reads (`SHARD_FORMAT_VERSION` in `egoexo-dataset`).
+SHARD_FORMAT_VERSION = 2
+FUSION_KEYS = EGO_KEYS + ["egonet", "rays", "ray_offsets", "ray_valid", "gate_features", "observer_mask", "occluded"]
 
 
 def parse_fold(text: str) -> tuple:
@@ -56,6 +58,10 @@ def load_shards(folders, keys: list, exclude_fold=None) -> dict:
     the EgoNet hashes of all folders under "egonet_sha256s"."""
     folders = [folders] if isinstance(folders, Path) else list(folders)
     indices = [json.loads((f / "index.json").read_text()) for f in folders]
+    for folder, index in zip(folders, indices):
+        if index.get("format_version") != SHARD_FORMAT_VERSION:
+            raise SystemExit(f"{folder / 'index.json'}: format_version {index.get('format_version')}, expected "
+                             f"{SHARD_FORMAT_VERSION}: remake the shards with this build's `egoexo synth --shards`")
     parts = {k: [] for k in keys}
     for folder, index in zip(folders, indices):
         for entry in index["shards"]:
@@ -136,7 +142,8 @@ def fusion_inputs(batch, gate_net, train: bool, generator: torch.Generator,
         ungated = (torch.rand(b, 1, 1, 1, generator=generator) < gate_dropout).float()
         gate = ungated * valid + (1.0 - ungated) * gate
     gate = gate * mask.unsqueeze(-1)
-    exo = torch.cat([batch["rays"] * gate.unsqueeze(-1), gate.unsqueeze(-1)], dim=-1)
+    g = gate.unsqueeze(-1)
+    exo = torch.cat([batch["rays"] * g, batch["ray_offsets"] * g, g], dim=-1)
     return exo, mask, gate
 
 

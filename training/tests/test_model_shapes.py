@@ -4,7 +4,7 @@
 import pytest
 import torch
 
-from egoexo_train.model import EgoNet, Fusion, Gate
+from egoexo_train.model import EXO_TOKEN_DIM, EgoNet, Fusion, Gate
 
 
 def test_shapes_and_gate_range():
@@ -21,7 +21,7 @@ def test_masked_observers_do_not_change_the_output(exo_embed):
     torch.manual_seed(1)
     fusion = Fusion(96, 32, 4, 1, 1, dropout=0.0, exo_embed=exo_embed).eval()
     ego, egonet = torch.randn(1, 96, 60), torch.randn(1, 96, 132)
-    exo = torch.randn(1, 96, 3, 13, 4)
+    exo = torch.randn(1, 96, 3, 13, EXO_TOKEN_DIM)
     mask = torch.tensor([1.0, 0.0, 0.0]).expand(1, 96, 3).clone()
     other = exo.clone()
     other[:, :, 1:] = torch.randn_like(other[:, :, 1:]) * 5
@@ -29,3 +29,24 @@ def test_masked_observers_do_not_change_the_output(exo_embed):
         a = fusion(ego, egonet, exo, mask)
         b = fusion(ego, egonet, other, mask)
     assert torch.allclose(a[0], b[0], atol=1e-5) and torch.allclose(a[1], b[1], atol=1e-5)
+
+
+def test_fusion_inputs_follow_the_engine_exo_layout():
+    # egoexo-infer's `gated_exo` (exo token layout v2): per keypoint, the ray endpoint and the
+    # ray offset each scaled by the gate, then the gate; masked observers are all zero.
+    from egoexo_train.train import fusion_inputs
+
+    torch.manual_seed(2)
+    b, t, n, k = 1, 96, 3, 13
+    batch = {
+        "rays": torch.randn(b, t, n, k, 3), "ray_offsets": torch.randn(b, t, n, k, 3),
+        "ray_valid": (torch.rand(b, t, n, k) > 0.2).float(), "gate_features": torch.rand(b, t, n, k, 5),
+        "observer_mask": torch.tensor([1.0, 1.0, 0.0]).expand(b, t, n).clone(),
+    }
+    exo, mask, gate = fusion_inputs(batch, Gate(5, 16), False, torch.Generator().manual_seed(0))
+    assert exo.shape == (b, t, n, k, EXO_TOKEN_DIM) == (b, t, n, k, 7)
+    g = gate.unsqueeze(-1)
+    assert torch.equal(exo[..., 0:3], batch["rays"] * g)
+    assert torch.equal(exo[..., 3:6], batch["ray_offsets"] * g)
+    assert torch.equal(exo[..., 6:7], g)
+    assert (exo[:, :, 2] == 0).all() and (gate[batch["ray_valid"] == 0] == 0).all()

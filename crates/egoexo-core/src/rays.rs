@@ -12,7 +12,7 @@
 //! Because the ray passes through the anchor, a keypoint that is the projection of the
 //! wearer's head-device origin maps exactly to `r = 0`.
 
-use glam::{Vec2, Vec3};
+use glam::{Quat, Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 
 use crate::camera::CameraCalibration;
@@ -54,6 +54,51 @@ pub fn canonicalize_ray(
     let endpoint_world = anchor + distance * direction_world;
     let r = t_world_wearer_head.rotation.conjugate() * (endpoint_world - wearer_head);
     r.is_finite().then_some(r)
+}
+
+/// Offset from an estimate of a keypoint's 3D position to the keypoint's viewing ray: `q − p`,
+/// where `p` is the estimate (world, metres) and `q` the point of the ray through `pixel`
+/// closest to it (not behind the camera), expressed in the axes of a frame whose world
+/// rotation is `r_world_frame`. The offset is perpendicular to the ray: it is the part of the
+/// estimate's error that the observer sees, free of the depth the detection cannot give. With
+/// EgoNet's coarse joints as estimates it tells the fusion network where each coarse joint
+/// must move. `None` under the same conditions as [`canonicalize_ray`].
+pub fn ray_offset_from_estimate(
+    pixel: Vec2,
+    camera: &CameraCalibration,
+    t_world_observer_device: &RigidTransform,
+    estimate_world: Vec3,
+    r_world_frame: Quat,
+) -> Option<Vec3> {
+    if !(pixel.is_finite() && t_world_observer_device.is_finite() && estimate_world.is_finite()) {
+        return None;
+    }
+    let t_world_camera = camera.t_world_camera(t_world_observer_device);
+    let direction_world = t_world_camera.transform_vector(camera.unproject(pixel)?).normalize();
+    let anchor = t_world_camera.translation;
+    let depth = (estimate_world - anchor).dot(direction_world).max(0.0);
+    let offset_world = anchor + depth * direction_world - estimate_world;
+    let offset = r_world_frame.conjugate() * offset_world;
+    offset.is_finite().then_some(offset)
+}
+
+/// [`ray_offset_from_estimate`] for the 13 keypoints of one observer at one frame, with the
+/// 13 estimates in world coordinates; zero where the keypoint is missing, does not unproject or
+/// its estimate is not finite.
+pub fn ray_offsets_from_estimates(
+    keypoints: &[Option<Keypoint2d>; EXO_KEYPOINT_COUNT],
+    camera: &CameraCalibration,
+    t_world_observer_device: &RigidTransform,
+    estimates_world: &[Vec3; EXO_KEYPOINT_COUNT],
+    r_world_frame: Quat,
+) -> [Vec3; EXO_KEYPOINT_COUNT] {
+    std::array::from_fn(|k| {
+        keypoints[k]
+            .and_then(|kp| {
+                ray_offset_from_estimate(kp.pixel, camera, t_world_observer_device, estimates_world[k], r_world_frame)
+            })
+            .unwrap_or(Vec3::ZERO)
+    })
 }
 
 /// The 13 canonical rays of one observer at one frame. `None` keypoints (not detected) and

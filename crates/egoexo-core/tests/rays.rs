@@ -11,7 +11,9 @@ use common::*;
 use egoexo_core::camera::CameraCalibration;
 use egoexo_core::exo_keypoints::{EXO_KEYPOINT_COUNT, Keypoint2d};
 use egoexo_core::glam::{Quat, Vec2, Vec3};
-use egoexo_core::rays::{CanonicalRay, canonicalize_keypoints, canonicalize_ray};
+use egoexo_core::rays::{
+    CanonicalRay, canonicalize_keypoints, canonicalize_ray, ray_offset_from_estimate, ray_offsets_from_estimates,
+};
 use egoexo_core::rigid::RigidTransform;
 use proptest::prelude::*;
 
@@ -146,6 +148,45 @@ proptest! {
             prop_assert!((e_world - centre).normalize().abs_diff_eq((p - centre).normalize(), 1e-4));
         }
     }
+
+    #[test]
+    fn an_estimate_off_the_ray_is_pulled_back_perpendicular_to_it(
+        s in scene(), shift in point(0.4), along in -0.5f32..0.5, frame in any_rotation(),
+    ) {
+        // Each body point is seen; its estimate is off by `shift`. The offset must undo the part
+        // of `shift` across the viewing ray and ignore the part along it (depth is unseen).
+        let camera = aria_rgb_camera();
+        let centre = camera.t_world_camera(&s.observer).translation;
+        let pixels = project_all(&camera, &s.observer, &s.body);
+        prop_assume!(pixels.iter().any(Option::is_some));
+        for (&p, px) in s.body.iter().zip(pixels) {
+            let Some(px) = px else { continue };
+            let view = (p - centre).normalize();
+            let across = shift - shift.dot(view) * view;
+            let estimate = p + across + along * view;
+            let offset = ray_offset_from_estimate(px, &camera, &s.observer, estimate, frame).unwrap();
+            let offset_world = frame * offset;
+            prop_assert!(offset_world.abs_diff_eq(-across, 3e-3), "{offset_world:?} vs {:?}", -across);
+            prop_assert!(offset_world.dot(view).abs() < 1e-3);
+        }
+    }
+}
+
+#[test]
+fn estimates_of_missing_keypoints_give_zero_offsets() {
+    let camera = aria_rgb_camera().with_valid_radius(650.0);
+    let observer = RigidTransform::cpf_looking_at(Vec3::new(0.0, 1.6, 4.0), Vec3::new(0.0, 1.6, 0.0));
+    let mut keypoints: [Option<Keypoint2d>; EXO_KEYPOINT_COUNT] = [None; EXO_KEYPOINT_COUNT];
+    let seen = Vec3::new(0.1, 1.2, 0.0);
+    keypoints[0] = Some(Keypoint2d { pixel: camera.project_world(seen, &observer).unwrap(), score: 0.9 });
+    keypoints[1] = Some(Keypoint2d { pixel: Vec2::new(5.0, 5.0), score: 0.9 }); // outside the image circle
+    let mut estimates = [Vec3::new(0.0, 1.0, 0.0); EXO_KEYPOINT_COUNT];
+    estimates[0] = seen + Vec3::X * 0.2;
+    let offsets = ray_offsets_from_estimates(&keypoints, &camera, &observer, &estimates, Quat::IDENTITY);
+    let view = (seen - camera.t_world_camera(&observer).translation).normalize();
+    let across = Vec3::X * 0.2 - 0.2 * view.x * view;
+    assert!(offsets[0].abs_diff_eq(-across, 1e-3), "{:?} vs {:?}", offsets[0], -across);
+    assert!(offsets[1..].iter().all(|o| *o == Vec3::ZERO));
 }
 
 #[test]

@@ -5,7 +5,8 @@
 //! - **ego** — for EgoNet: `ego [W,T,60]`, `target [W,T,132]`, `frame_mask [W,T]`,
 //!   `rest_joints [W,24,3]`, and `subject`, `clip`, `start` `[W]` (int32).
 //! - **fusion** — everything of the ego stage plus, from a trained EgoNet run by tract:
-//!   `egonet [W,T,132]`, `rays [W,T,N,K,3]`, `ray_valid [W,T,N,K]`,
+//!   `egonet [W,T,132]`, `rays [W,T,N,K,3]` (wearer head frame), `ray_offsets [W,T,N,K,3]`
+//!   (window frame, [`egoexo_infer::inputs`]), `ray_valid [W,T,N,K]`,
 //!   `gate_features [W,T,N,K,F]`, `observer_mask [W,T,N]`, and the simulator's labels
 //!   `occluded [W,T,N,K]` (1 = the keypoint was hidden by furniture or a bystander).
 //!
@@ -30,8 +31,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::DatasetError;
 
-/// Version of the shard format.
-pub const SHARD_FORMAT_VERSION: u32 = 1;
+/// Version of the shard format. v2 added `ray_offsets`.
+pub const SHARD_FORMAT_VERSION: u32 = 2;
 
 /// Which networks the shards train.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -117,6 +118,7 @@ struct Buffer {
     start: Vec<i32>,
     egonet: Vec<f32>,
     rays: Vec<f32>,
+    ray_offsets: Vec<f32>,
     ray_valid: Vec<f32>,
     gate_features: Vec<f32>,
     observer_mask: Vec<f32>,
@@ -141,6 +143,7 @@ impl Buffer {
         if stage == ShardStage::Fusion {
             npz.add("egonet", &[w, t, POSE_DIM as u64], &self.egonet).map_err(io)?;
             npz.add("rays", &[w, t, n, k, 3], &self.rays).map_err(io)?;
+            npz.add("ray_offsets", &[w, t, n, k, 3], &self.ray_offsets).map_err(io)?;
             npz.add("ray_valid", &[w, t, n, k], &self.ray_valid).map_err(io)?;
             npz.add("gate_features", &[w, t, n, k, GATE_FEATURE_DIM as u64], &self.gate_features).map_err(io)?;
             npz.add("observer_mask", &[w, t, n], &self.observer_mask).map_err(io)?;
@@ -283,6 +286,7 @@ fn add_windows(
             let exo = exo_window(aligned, &window, &coarse_world, &observers, slots);
             buffer.egonet.extend_from_slice(&coarse);
             buffer.rays.extend_from_slice(&exo.rays);
+            buffer.ray_offsets.extend_from_slice(&exo.ray_offsets);
             buffer.ray_valid.extend_from_slice(&exo.ray_valid);
             buffer.gate_features.extend_from_slice(&exo.gate_features);
             buffer.observer_mask.extend_from_slice(&exo.observer_mask);

@@ -142,7 +142,8 @@ for entry in index["shards"]:
     w = entry["windows"]
     W += w
     shapes = {"ego": (w, T, 60), "target": (w, T, 132), "frame_mask": (w, T), "rest_joints": (w, 24, 3),
-              "egonet": (w, T, 132), "rays": (w, T, N, K, 3), "ray_valid": (w, T, N, K),
+              "egonet": (w, T, 132), "rays": (w, T, N, K, 3), "ray_offsets": (w, T, N, K, 3),
+              "ray_valid": (w, T, N, K),
               "gate_features": (w, T, N, K, 5), "observer_mask": (w, T, N), "occluded": (w, T, N, K)}
     for key, shape in shapes.items():
         assert z[key].shape == shape, (key, z[key].shape, shape)
@@ -153,6 +154,11 @@ for entry in index["shards"]:
     # Invalid rays are zero; valid ones lie within a few metres of the head.
     assert (z["rays"][z["ray_valid"] == 0] == 0).all()
     assert np.abs(z["rays"]).max() < 10
+    # Offsets from the coarse joints to their rays: zero where invalid, some nonzero, and
+    # within a few metres (the fixture EgoNet is untrained, so its coarse pose is anywhere
+    # near the head, not near the body).
+    assert (z["ray_offsets"][z["ray_valid"] == 0] == 0).all()
+    assert 0 < np.abs(z["ray_offsets"]).max() < 10
     assert (z["gate_features"][..., 0] >= 0).all() and (z["gate_features"][..., 0] <= 1).all()
     assert (z["observer_mask"] == (z["ray_valid"].max(axis=-1) > 0)).all()
 print(W)

@@ -9,6 +9,12 @@
 //! - `gate_features` `[1, T, N, K, F]` — [`egoexo_core::gate_features`] layout v1.
 //! - `rays` `[1, T, N, K, 3]` — canonical ray endpoints in the wearer's head frame (metres),
 //!   zero when invalid; `ray_valid` `[1, T, N, K]`.
+//! - `ray_offsets` `[1, T, N, K, 3]` — from each of EgoNet's coarse keypoints to its detection's
+//!   viewing ray, perpendicular to the ray, in window-frame axes (metres), zero when invalid
+//!   ([`egoexo_core::rays::ray_offset_from_estimate`]).
+//! - `exo` `[1, T, N, K, 7]` — the fusion network's exo input, exo token layout
+//!   [`EXO_TOKEN_LAYOUT_VERSION`]: the ray endpoint and the ray offset, each scaled by the gate,
+//!   then the gate ([`gated_exo`]).
 //! - `observer_mask` `[1, T, N]` — 1 where the slot holds an observer whose head is tracked and
 //!   at least one ray is valid at that frame.
 //!
@@ -20,7 +26,7 @@ use egoexo_core::ego_features::{EGO_FEATURE_DIM, EgoTrajectories, TrackingMode, 
 use egoexo_core::exo_keypoints::{EXO_KEYPOINT_COUNT, exo_keypoints_from_smpl};
 use egoexo_core::gate_features::{GATE_FEATURE_DIM, gate_features};
 use egoexo_core::glam::{Quat, Vec3};
-use egoexo_core::rays::canonicalize_keypoints;
+use egoexo_core::rays::{canonicalize_keypoints, ray_offsets_from_estimates};
 use egoexo_core::region::{DEFAULT_REGION_MARGIN, propose_region};
 use egoexo_core::rigid::RigidTransform;
 use egoexo_core::rotation::Rot6d;
@@ -140,8 +146,10 @@ pub struct ExoWindow {
     pub slots: usize,
     /// Which session observer fills each slot.
     pub slot_observer: Vec<Option<usize>>,
-    /// `[T, N, K, 3]`.
+    /// `[T, N, K, 3]`, wearer head frame.
     pub rays: Vec<f32>,
+    /// `[T, N, K, 3]`, window-frame axes.
+    pub ray_offsets: Vec<f32>,
     /// `[T, N, K]`.
     pub ray_valid: Vec<f32>,
     /// `[T, N, K, F]`.
@@ -173,6 +181,7 @@ pub fn exo_window(
         slots,
         slot_observer: (0..slots).map(|s| observers.get(s).copied()).collect(),
         rays: vec![0.0; WINDOW * slots * EXO_KEYPOINT_COUNT * 3],
+        ray_offsets: vec![0.0; WINDOW * slots * EXO_KEYPOINT_COUNT * 3],
         ray_valid: vec![0.0; WINDOW * slots * EXO_KEYPOINT_COUNT],
         gate_features: vec![0.0; WINDOW * slots * EXO_KEYPOINT_COUNT * GATE_FEATURE_DIM],
         observer_mask: vec![0.0; WINDOW * slots],
@@ -194,10 +203,20 @@ pub fn exo_window(
             let detected = &observer.keypoints[frame];
             let rays = canonicalize_keypoints(detected, &observer.camera, observer_pose, &window.head[t]);
             let valid = rays.map(|r| r.valid);
+            let offsets = ray_offsets_from_estimates(
+                detected,
+                &observer.camera,
+                observer_pose,
+                &predicted_points,
+                window.t_world_window.rotation,
+            );
             let features = gate_features(detected, &valid, &predicted, &observer.camera, &region);
             for k in 0..EXO_KEYPOINT_COUNT {
                 let i = exo.index(t, slot, k);
                 exo.rays[3 * i..3 * i + 3].copy_from_slice(&rays[k].endpoint.to_array());
+                if valid[k] {
+                    exo.ray_offsets[3 * i..3 * i + 3].copy_from_slice(&offsets[k].to_array());
+                }
                 exo.ray_valid[i] = f32::from(u8::from(valid[k]));
                 exo.gate_features[GATE_FEATURE_DIM * i..GATE_FEATURE_DIM * (i + 1)].copy_from_slice(&features[k]);
             }
@@ -211,15 +230,26 @@ fn project(camera: &CameraCalibration, t_world_device: &RigidTransform, p: Vec3)
     camera.project_world(p, t_world_device)
 }
 
-/// `[T, N, K, 4]` fusion input: each ray scaled by its gate value, then the gate value.
+/// Version of the exo token layout (the fusion network's `exo` input per keypoint). v1: the
+/// gated ray endpoint and the gate (4 numbers, the paper's); v2: the gated ray endpoint, the
+/// gated ray offset and the gate (7 numbers).
+pub const EXO_TOKEN_LAYOUT_VERSION: u32 = 2;
+
+/// Numbers per keypoint in the exo input, layout [`EXO_TOKEN_LAYOUT_VERSION`].
+pub const EXO_TOKEN_DIM: usize = 7;
+
+/// `[T, N, K, 7]` fusion input: each ray endpoint and ray offset scaled by its gate value, then
+/// the gate value.
 pub fn gated_exo(exo: &ExoWindow, gate: &[f32]) -> Vec<f32> {
-    let mut out = vec![0.0; WINDOW * exo.slots * EXO_KEYPOINT_COUNT * 4];
+    let mut out = vec![0.0; WINDOW * exo.slots * EXO_KEYPOINT_COUNT * EXO_TOKEN_DIM];
     for i in 0..WINDOW * exo.slots * EXO_KEYPOINT_COUNT {
         let g = gate[i] * exo.ray_valid[i];
+        let token = &mut out[EXO_TOKEN_DIM * i..EXO_TOKEN_DIM * (i + 1)];
         for c in 0..3 {
-            out[4 * i + c] = g * exo.rays[3 * i + c];
+            token[c] = g * exo.rays[3 * i + c];
+            token[3 + c] = g * exo.ray_offsets[3 * i + c];
         }
-        out[4 * i + 3] = g;
+        token[6] = g;
     }
     out
 }

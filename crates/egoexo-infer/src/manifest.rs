@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use crate::InferError;
+use crate::inputs::{EXO_TOKEN_DIM, EXO_TOKEN_LAYOUT_VERSION};
 use crate::windows::WINDOW;
 
 /// Version of the manifest format.
@@ -35,12 +36,29 @@ pub struct ModelFile {
     pub outputs: Vec<TensorSpec>,
 }
 
+/// The fusion network's per-keypoint exo input ([`crate::inputs::gated_exo`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ExoTokenLayout {
+    pub version: u32,
+    /// Numbers per keypoint.
+    pub dim: usize,
+}
+
+impl Default for ExoTokenLayout {
+    /// Manifests written before the layout was recorded used v1 (ray endpoint and gate).
+    fn default() -> Self {
+        Self { version: 1, dim: 4 }
+    }
+}
+
 /// The networks of one tracking mode.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ModelSetManifest {
     pub tracking: TrackingMode,
     pub ego_feature_layout: EgoFeatureLayout,
     pub gate_feature_layout: GateFeatureLayout,
+    #[serde(default)]
+    pub exo_token_layout: ExoTokenLayout,
     /// Observer slots of the fusion network.
     pub max_observers: usize,
     /// Transformer width.
@@ -98,6 +116,13 @@ impl Manifest {
                 return Err(InferError::Manifest(format!(
                     "manifest.json: {mode}-point gate expects gate feature layout v{}, this build computes v{GATE_FEATURE_LAYOUT_VERSION}",
                     set.gate_feature_layout.version
+                )));
+            }
+            let exo = set.exo_token_layout;
+            if exo.version != EXO_TOKEN_LAYOUT_VERSION || exo.dim != EXO_TOKEN_DIM {
+                return Err(InferError::Manifest(format!(
+                    "manifest.json: {mode}-point fusion expects exo token layout v{} ({} numbers per keypoint), this build makes v{EXO_TOKEN_LAYOUT_VERSION} ({EXO_TOKEN_DIM}): retrain or use models made for this build",
+                    exo.version, exo.dim
                 )));
             }
             if set.ego_feature_layout.tracking != set.tracking {

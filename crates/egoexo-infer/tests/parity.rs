@@ -81,3 +81,15 @@ fn a_manifest_from_another_feature_layout_is_refused() {
     let err = egoexo_infer::manifest::Manifest::from_json(stale.as_bytes()).unwrap_err();
     assert!(err.to_string().contains("layout v99"), "{err}");
 }
+
+#[test]
+fn a_manifest_for_the_old_exo_token_layout_is_refused() {
+    // Manifests from before the ray offsets carry no exo token layout: they mean v1 (4 numbers).
+    let text = std::fs::read_to_string(fixture_dir().join("manifest.json")).unwrap();
+    let mut manifest: serde_json::Value = serde_json::from_str(&text).unwrap();
+    for set in manifest["model_sets"].as_array_mut().unwrap() {
+        set.as_object_mut().unwrap().remove("exo_token_layout");
+    }
+    let err = egoexo_infer::manifest::Manifest::from_json(manifest.to_string().as_bytes()).unwrap_err();
+    assert!(err.to_string().contains("exo token layout v1 (4 numbers per keypoint)"), "{err}");
+}

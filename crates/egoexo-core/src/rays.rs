@@ -33,6 +33,64 @@ impl CanonicalRay {
     pub const MISSING: CanonicalRay = CanonicalRay { endpoint: Vec3::ZERO, valid: false };
 }
 
+/// The world line of sight of one keypoint: from the observer camera's optical centre through
+/// the unprojected pixel. Unprojecting is the costly step (Fisheye624 is inverted
+/// iteratively), so a keypoint is unprojected once and both the canonical endpoint and the
+/// offset are taken from this.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewingRay {
+    /// The camera's optical centre, world (metres).
+    pub anchor: Vec3,
+    /// Unit direction, world.
+    pub direction: Vec3,
+}
+
+impl ViewingRay {
+    /// The ray through `pixel` of `camera` on an observer device at `t_world_observer_device`.
+    /// `None` if the pixel does not unproject (outside the valid region) or an input is not
+    /// finite.
+    pub fn through_pixel(
+        pixel: Vec2,
+        camera: &CameraCalibration,
+        t_world_observer_device: &RigidTransform,
+    ) -> Option<Self> {
+        if !(pixel.is_finite() && t_world_observer_device.is_finite()) {
+            return None;
+        }
+        let t_world_camera = camera.t_world_camera(t_world_observer_device);
+        let direction = t_world_camera.transform_vector(camera.unproject(pixel)?).normalize();
+        let anchor = t_world_camera.translation;
+        (direction.is_finite() && anchor.is_finite()).then_some(Self { anchor, direction })
+    }
+
+    /// Canonical endpoint `r` (wearer head-device frame, metres) for a wearer whose head device
+    /// is at `t_world_wearer_head`: the point of the ray at the head's distance from the anchor.
+    pub fn canonical_endpoint(&self, t_world_wearer_head: &RigidTransform) -> Option<Vec3> {
+        if !t_world_wearer_head.is_finite() {
+            return None;
+        }
+        let wearer_head = t_world_wearer_head.translation;
+        let distance = wearer_head.distance(self.anchor);
+        let endpoint_world = self.anchor + distance * self.direction;
+        let r = t_world_wearer_head.rotation.conjugate() * (endpoint_world - wearer_head);
+        r.is_finite().then_some(r)
+    }
+
+    /// Offset from an estimate `p` of the keypoint's 3D position (world, metres) to this ray:
+    /// `q − p` with `q` the point of the ray closest to `p` (not behind the camera), in the axes
+    /// of a frame whose world rotation is `r_world_frame`. Perpendicular to the ray: the part
+    /// of the estimate's error the observer sees, free of the depth a detection cannot give.
+    pub fn offset_from(&self, estimate_world: Vec3, r_world_frame: Quat) -> Option<Vec3> {
+        if !estimate_world.is_finite() {
+            return None;
+        }
+        let depth = (estimate_world - self.anchor).dot(self.direction).max(0.0);
+        let offset_world = self.anchor + depth * self.direction - estimate_world;
+        let offset = r_world_frame.conjugate() * offset_world;
+        offset.is_finite().then_some(offset)
+    }
+}
+
 /// Canonical endpoint `r` for a keypoint at `pixel` seen by `camera` on an observer device at
 /// `t_world_observer_device`, for a wearer whose head device is at `t_world_wearer_head`.
 /// `None` if the pixel does not unproject (outside the valid region) or any input is not
@@ -43,26 +101,13 @@ pub fn canonicalize_ray(
     t_world_observer_device: &RigidTransform,
     t_world_wearer_head: &RigidTransform,
 ) -> Option<Vec3> {
-    if !(pixel.is_finite() && t_world_observer_device.is_finite() && t_world_wearer_head.is_finite()) {
-        return None;
-    }
-    let t_world_camera = camera.t_world_camera(t_world_observer_device);
-    let direction_world = t_world_camera.transform_vector(camera.unproject(pixel)?).normalize();
-    let anchor = t_world_camera.translation;
-    let wearer_head = t_world_wearer_head.translation;
-    let distance = wearer_head.distance(anchor);
-    let endpoint_world = anchor + distance * direction_world;
-    let r = t_world_wearer_head.rotation.conjugate() * (endpoint_world - wearer_head);
-    r.is_finite().then_some(r)
+    ViewingRay::through_pixel(pixel, camera, t_world_observer_device)?.canonical_endpoint(t_world_wearer_head)
 }
 
-/// Offset from an estimate of a keypoint's 3D position to the keypoint's viewing ray: `q − p`,
-/// where `p` is the estimate (world, metres) and `q` the point of the ray through `pixel`
-/// closest to it (not behind the camera), expressed in the axes of a frame whose world
-/// rotation is `r_world_frame`. The offset is perpendicular to the ray: it is the part of the
-/// estimate's error that the observer sees, free of the depth the detection cannot give. With
-/// EgoNet's coarse joints as estimates it tells the fusion network where each coarse joint
-/// must move. `None` under the same conditions as [`canonicalize_ray`].
+/// Offset from an estimate of a keypoint's 3D position to the keypoint's viewing ray
+/// ([`ViewingRay::offset_from`]). With EgoNet's coarse joints as estimates it tells the fusion
+/// network where each coarse joint must move. `None` under the same conditions as
+/// [`canonicalize_ray`], or if the estimate is not finite.
 pub fn ray_offset_from_estimate(
     pixel: Vec2,
     camera: &CameraCalibration,
@@ -70,34 +115,28 @@ pub fn ray_offset_from_estimate(
     estimate_world: Vec3,
     r_world_frame: Quat,
 ) -> Option<Vec3> {
-    if !(pixel.is_finite() && t_world_observer_device.is_finite() && estimate_world.is_finite()) {
-        return None;
-    }
-    let t_world_camera = camera.t_world_camera(t_world_observer_device);
-    let direction_world = t_world_camera.transform_vector(camera.unproject(pixel)?).normalize();
-    let anchor = t_world_camera.translation;
-    let depth = (estimate_world - anchor).dot(direction_world).max(0.0);
-    let offset_world = anchor + depth * direction_world - estimate_world;
-    let offset = r_world_frame.conjugate() * offset_world;
-    offset.is_finite().then_some(offset)
+    ViewingRay::through_pixel(pixel, camera, t_world_observer_device)?.offset_from(estimate_world, r_world_frame)
 }
 
-/// [`ray_offset_from_estimate`] for the 13 keypoints of one observer at one frame, with the
-/// 13 estimates in world coordinates; zero where the keypoint is missing, does not unproject or
-/// its estimate is not finite.
-pub fn ray_offsets_from_estimates(
+/// The 13 keypoints of one observer at one frame, each unprojected once: its canonical ray
+/// (as [`canonicalize_keypoints`]) and its offset from `estimates_world[k]` in the axes of
+/// `r_world_frame` (as [`ray_offset_from_estimate`]; zero where the ray is invalid or the
+/// estimate is not finite).
+pub fn canonicalize_keypoints_with_offsets(
     keypoints: &[Option<Keypoint2d>; EXO_KEYPOINT_COUNT],
     camera: &CameraCalibration,
     t_world_observer_device: &RigidTransform,
+    t_world_wearer_head: &RigidTransform,
     estimates_world: &[Vec3; EXO_KEYPOINT_COUNT],
     r_world_frame: Quat,
-) -> [Vec3; EXO_KEYPOINT_COUNT] {
+) -> [(CanonicalRay, Vec3); EXO_KEYPOINT_COUNT] {
     std::array::from_fn(|k| {
-        keypoints[k]
-            .and_then(|kp| {
-                ray_offset_from_estimate(kp.pixel, camera, t_world_observer_device, estimates_world[k], r_world_frame)
-            })
-            .unwrap_or(Vec3::ZERO)
+        let ray = keypoints[k].and_then(|kp| ViewingRay::through_pixel(kp.pixel, camera, t_world_observer_device));
+        let Some(endpoint) = ray.and_then(|r| r.canonical_endpoint(t_world_wearer_head)) else {
+            return (CanonicalRay::MISSING, Vec3::ZERO);
+        };
+        let offset = ray.and_then(|r| r.offset_from(estimates_world[k], r_world_frame)).unwrap_or(Vec3::ZERO);
+        (CanonicalRay { endpoint, valid: true }, offset)
     })
 }
 

@@ -12,7 +12,8 @@ use egoexo_core::camera::CameraCalibration;
 use egoexo_core::exo_keypoints::{EXO_KEYPOINT_COUNT, Keypoint2d};
 use egoexo_core::glam::{Quat, Vec2, Vec3};
 use egoexo_core::rays::{
-    CanonicalRay, canonicalize_keypoints, canonicalize_ray, ray_offset_from_estimate, ray_offsets_from_estimates,
+    CanonicalRay, canonicalize_keypoints, canonicalize_keypoints_with_offsets, canonicalize_ray,
+    ray_offset_from_estimate,
 };
 use egoexo_core::rigid::RigidTransform;
 use proptest::prelude::*;
@@ -182,7 +183,11 @@ fn estimates_of_missing_keypoints_give_zero_offsets() {
     keypoints[1] = Some(Keypoint2d { pixel: Vec2::new(5.0, 5.0), score: 0.9 }); // outside the image circle
     let mut estimates = [Vec3::new(0.0, 1.0, 0.0); EXO_KEYPOINT_COUNT];
     estimates[0] = seen + Vec3::X * 0.2;
-    let offsets = ray_offsets_from_estimates(&keypoints, &camera, &observer, &estimates, Quat::IDENTITY);
+    let wearer = RigidTransform::from_translation(Vec3::new(0.0, 1.6, 0.0));
+    let both = canonicalize_keypoints_with_offsets(&keypoints, &camera, &observer, &wearer, &estimates, Quat::IDENTITY);
+    // The rays are exactly `canonicalize_keypoints`'s; the offsets come from the same unprojection.
+    assert_eq!(both.map(|(r, _)| r), canonicalize_keypoints(&keypoints, &camera, &observer, &wearer));
+    let offsets = both.map(|(_, o)| o);
     let view = (seen - camera.t_world_camera(&observer).translation).normalize();
     let across = Vec3::X * 0.2 - 0.2 * view.x * view;
     assert!(offsets[0].abs_diff_eq(-across, 1e-3), "{:?} vs {:?}", offsets[0], -across);

@@ -26,7 +26,7 @@ use egoexo_core::ego_features::{EGO_FEATURE_DIM, EgoTrajectories, TrackingMode, 
 use egoexo_core::exo_keypoints::{EXO_KEYPOINT_COUNT, exo_keypoints_from_smpl};
 use egoexo_core::gate_features::{GATE_FEATURE_DIM, gate_features};
 use egoexo_core::glam::{Quat, Vec3};
-use egoexo_core::rays::{canonicalize_keypoints, ray_offsets_from_estimates};
+use egoexo_core::rays::canonicalize_keypoints_with_offsets;
 use egoexo_core::region::{DEFAULT_REGION_MARGIN, propose_region};
 use egoexo_core::rigid::RigidTransform;
 use egoexo_core::rotation::Rot6d;
@@ -201,22 +201,21 @@ pub fn exo_window(
             let predicted_points = exo_keypoints_from_smpl(&fk.positions, fk.rotations[SmplJoint::Head.index()], scale);
             let predicted = predicted_points.map(|p| project(&observer.camera, observer_pose, p));
             let detected = &observer.keypoints[frame];
-            let rays = canonicalize_keypoints(detected, &observer.camera, observer_pose, &window.head[t]);
-            let valid = rays.map(|r| r.valid);
-            let offsets = ray_offsets_from_estimates(
+            let rays_and_offsets = canonicalize_keypoints_with_offsets(
                 detected,
                 &observer.camera,
                 observer_pose,
+                &window.head[t],
                 &predicted_points,
                 window.t_world_window.rotation,
             );
+            let valid = rays_and_offsets.map(|(r, _)| r.valid);
             let features = gate_features(detected, &valid, &predicted, &observer.camera, &region);
             for k in 0..EXO_KEYPOINT_COUNT {
                 let i = exo.index(t, slot, k);
-                exo.rays[3 * i..3 * i + 3].copy_from_slice(&rays[k].endpoint.to_array());
-                if valid[k] {
-                    exo.ray_offsets[3 * i..3 * i + 3].copy_from_slice(&offsets[k].to_array());
-                }
+                let (ray, offset) = rays_and_offsets[k];
+                exo.rays[3 * i..3 * i + 3].copy_from_slice(&ray.endpoint.to_array());
+                exo.ray_offsets[3 * i..3 * i + 3].copy_from_slice(&offset.to_array());
                 exo.ray_valid[i] = f32::from(u8::from(valid[k]));
                 exo.gate_features[GATE_FEATURE_DIM * i..GATE_FEATURE_DIM * (i + 1)].copy_from_slice(&features[k]);
             }

@@ -104,24 +104,10 @@ pub fn canonicalize_ray(
     ViewingRay::through_pixel(pixel, camera, t_world_observer_device)?.canonical_endpoint(t_world_wearer_head)
 }
 
-/// Offset from an estimate of a keypoint's 3D position to the keypoint's viewing ray
-/// ([`ViewingRay::offset_from`]). With EgoNet's coarse joints as estimates it tells the fusion
-/// network where each coarse joint must move. `None` under the same conditions as
-/// [`canonicalize_ray`], or if the estimate is not finite.
-pub fn ray_offset_from_estimate(
-    pixel: Vec2,
-    camera: &CameraCalibration,
-    t_world_observer_device: &RigidTransform,
-    estimate_world: Vec3,
-    r_world_frame: Quat,
-) -> Option<Vec3> {
-    ViewingRay::through_pixel(pixel, camera, t_world_observer_device)?.offset_from(estimate_world, r_world_frame)
-}
-
 /// The 13 keypoints of one observer at one frame, each unprojected once: its canonical ray
-/// (as [`canonicalize_keypoints`]) and its offset from `estimates_world[k]` in the axes of
-/// `r_world_frame` (as [`ray_offset_from_estimate`]; zero where the ray is invalid or the
-/// estimate is not finite).
+/// (as [`canonicalize_keypoints`]) and the offset from `estimates_world[k]` — with EgoNet's
+/// coarse keypoints, where each coarse joint must move — in the axes of `r_world_frame`
+/// ([`ViewingRay::offset_from`]; zero where the ray is invalid or the estimate is not finite).
 pub fn canonicalize_keypoints_with_offsets(
     keypoints: &[Option<Keypoint2d>; EXO_KEYPOINT_COUNT],
     camera: &CameraCalibration,
@@ -131,11 +117,13 @@ pub fn canonicalize_keypoints_with_offsets(
     r_world_frame: Quat,
 ) -> [(CanonicalRay, Vec3); EXO_KEYPOINT_COUNT] {
     std::array::from_fn(|k| {
-        let ray = keypoints[k].and_then(|kp| ViewingRay::through_pixel(kp.pixel, camera, t_world_observer_device));
-        let Some(endpoint) = ray.and_then(|r| r.canonical_endpoint(t_world_wearer_head)) else {
+        let seen = keypoints[k]
+            .and_then(|kp| ViewingRay::through_pixel(kp.pixel, camera, t_world_observer_device))
+            .and_then(|ray| Some((ray, ray.canonical_endpoint(t_world_wearer_head)?)));
+        let Some((ray, endpoint)) = seen else {
             return (CanonicalRay::MISSING, Vec3::ZERO);
         };
-        let offset = ray.and_then(|r| r.offset_from(estimates_world[k], r_world_frame)).unwrap_or(Vec3::ZERO);
+        let offset = ray.offset_from(estimates_world[k], r_world_frame).unwrap_or(Vec3::ZERO);
         (CanonicalRay { endpoint, valid: true }, offset)
     })
 }

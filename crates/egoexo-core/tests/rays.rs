@@ -12,8 +12,7 @@ use egoexo_core::camera::CameraCalibration;
 use egoexo_core::exo_keypoints::{EXO_KEYPOINT_COUNT, Keypoint2d};
 use egoexo_core::glam::{Quat, Vec2, Vec3};
 use egoexo_core::rays::{
-    CanonicalRay, canonicalize_keypoints, canonicalize_keypoints_with_offsets, canonicalize_ray,
-    ray_offset_from_estimate,
+    CanonicalRay, ViewingRay, canonicalize_keypoints, canonicalize_keypoints_with_offsets, canonicalize_ray,
 };
 use egoexo_core::rigid::RigidTransform;
 use proptest::prelude::*;
@@ -165,7 +164,8 @@ proptest! {
             let view = (p - centre).normalize();
             let across = shift - shift.dot(view) * view;
             let estimate = p + across + along * view;
-            let offset = ray_offset_from_estimate(px, &camera, &s.observer, estimate, frame).unwrap();
+            let ray = ViewingRay::through_pixel(px, &camera, &s.observer).unwrap();
+            let offset = ray.offset_from(estimate, frame).unwrap();
             let offset_world = frame * offset;
             prop_assert!(offset_world.abs_diff_eq(-across, 3e-3), "{offset_world:?} vs {:?}", -across);
             prop_assert!(offset_world.dot(view).abs() < 1e-3);

@@ -11,7 +11,7 @@
 //!   zero when invalid; `ray_valid` `[1, T, N, K]`.
 //! - `ray_offsets` `[1, T, N, K, 3]` — from each of EgoNet's coarse keypoints to its detection's
 //!   viewing ray, perpendicular to the ray, in window-frame axes (metres), zero when invalid
-//!   ([`egoexo_core::rays::ray_offset_from_estimate`]).
+//!   ([`egoexo_core::rays::ViewingRay::offset_from`]).
 //! - `exo` `[1, T, N, K, 7]` — the fusion network's exo input, exo token layout
 //!   [`EXO_TOKEN_LAYOUT_VERSION`]: the ray endpoint and the ray offset, each scaled by the gate,
 //!   then the gate ([`gated_exo`]).
@@ -272,4 +272,43 @@ pub fn window_targets(aligned: &AlignedSession, window: &EgoWindow) -> Option<Ve
         encode_pose(r_window_world * pose.root_orientation, &pose.body, &mut out[t * POSE_DIM..(t + 1) * POSE_DIM]);
     }
     Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gated_exo_writes_the_endpoint_the_offset_then_the_gate_and_zeroes_invalid_rays() {
+        // The layout `train.py` builds (training/tests/test_model_shapes.py checks that side).
+        let slots = 1;
+        let n = WINDOW * slots * EXO_KEYPOINT_COUNT;
+        let (valid, invalid) = (3 * EXO_KEYPOINT_COUNT + 4, 3 * EXO_KEYPOINT_COUNT + 5);
+        let exo = ExoWindow {
+            slots,
+            slot_observer: vec![Some(0)],
+            rays: (0..3 * n).map(|v| v as f32).collect(),
+            ray_offsets: (0..3 * n).map(|v| -(v as f32)).collect(),
+            ray_valid: (0..n).map(|i| f32::from(u8::from(i != invalid))).collect(),
+            gate_features: vec![0.0; n * GATE_FEATURE_DIM],
+            observer_mask: vec![1.0; WINDOW * slots],
+        };
+        let gate = vec![0.5; n];
+        let out = gated_exo(&exo, &gate);
+        assert_eq!(out.len(), n * EXO_TOKEN_DIM);
+        assert_eq!((exo.index(3, 0, 4), exo.index(3, 0, 5)), (valid, invalid));
+        assert_eq!(
+            &out[EXO_TOKEN_DIM * valid..EXO_TOKEN_DIM * (valid + 1)],
+            &[
+                0.5 * exo.rays[3 * valid],
+                0.5 * exo.rays[3 * valid + 1],
+                0.5 * exo.rays[3 * valid + 2],
+                0.5 * exo.ray_offsets[3 * valid],
+                0.5 * exo.ray_offsets[3 * valid + 1],
+                0.5 * exo.ray_offsets[3 * valid + 2],
+                0.5,
+            ]
+        );
+        assert!(out[EXO_TOKEN_DIM * invalid..EXO_TOKEN_DIM * (invalid + 1)].iter().all(|&v| v == 0.0));
+    }
 }

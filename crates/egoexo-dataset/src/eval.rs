@@ -50,6 +50,11 @@ pub struct EvalReport {
     pub occluded_frames: usize,
     pub rows: Vec<EvalRow>,
     pub occluded_rows: Vec<EvalRow>,
+    /// The true motion scored against itself on the same frames (all, occluded): its jitter is
+    /// the smoothness a faithful reconstruction should have — jitter far below it means
+    /// over-smoothed motion, above it shaky motion. `None` when no segment has 4 frames.
+    pub ground_truth: Option<MotionMetrics>,
+    pub occluded_ground_truth: Option<MotionMetrics>,
 }
 
 /// Simulates and aligns clip `clip` for evaluation (deterministic in `seed` and the clip).
@@ -108,6 +113,7 @@ pub fn evaluate(
     }
     let mut all: Vec<MetricsAccumulator> = options.methods.iter().map(|_| MetricsAccumulator::new()).collect();
     let mut occluded: Vec<MetricsAccumulator> = options.methods.iter().map(|_| MetricsAccumulator::new()).collect();
+    let (mut truth, mut occluded_truth) = (MetricsAccumulator::new(), MetricsAccumulator::new());
     let (mut frames, mut occluded_frames) = (0, 0);
     let protocol = ReconstructOptions {
         method: Method::RestPose,
@@ -126,6 +132,12 @@ pub fn evaluate(
         frames += segments.iter().map(|s| s.len()).sum::<usize>();
         occluded_frames +=
             segments.iter().map(|s| hidden[s.frames.clone()].iter().filter(|&&h| h).count()).sum::<usize>();
+        for segment in &segments {
+            let range = segment.frames.clone();
+            let (joints, fps) = (&gt_joints[range.clone()], aligned.timeline.fps);
+            truth.add_segment(joints, joints, fps, None)?;
+            occluded_truth.add_segment(joints, joints, fps, Some(&hidden[range]))?;
+        }
         for (m, &method) in options.methods.iter().enumerate() {
             let r = engine
                 .reconstruct(&aligned, &ReconstructOptions { method, ..protocol }, &mut |_| true)
@@ -160,6 +172,8 @@ pub fn evaluate(
         occluded_frames,
         rows: rows(&all),
         occluded_rows: rows(&occluded),
+        ground_truth: truth.finish(),
+        occluded_ground_truth: occluded_truth.finish(),
     })
 }
 
@@ -169,7 +183,11 @@ pub fn format_table(report: &EvalReport) -> String {
         "{}-point tracking, {} observer(s), subjects {:?}: {} clips, {} frames ({} occluded)\n",
         report.tracking, report.observers, report.subjects, report.clips, report.frames, report.occluded_frames
     );
-    for (title, rows) in [("all frames", &report.rows), ("occluded frames", &report.occluded_rows)] {
+    let sections = [
+        ("all frames", &report.rows, &report.ground_truth),
+        ("occluded frames", &report.occluded_rows, &report.occluded_ground_truth),
+    ];
+    for (title, rows, truth) in sections {
         out.push_str(&format!("\n{title}\n"));
         out.push_str(&format!(
             "{:<20} {:>8} {:>8} {:>8} {:>11} {:>8}\n",
@@ -186,6 +204,13 @@ pub fn format_table(report: &EvalReport) -> String {
                 m.lower_cm,
                 m.mpjve_cm_s,
                 m.jitter
+            ));
+        }
+        if let Some(truth) = truth {
+            let dash = "-";
+            out.push_str(&format!(
+                "{:<20} {dash:>8} {dash:>8} {dash:>8} {dash:>11} {:>8.2}\n",
+                "(ground truth)", truth.jitter
             ));
         }
     }

@@ -207,13 +207,20 @@ fn evaluation_scores_every_method_on_all_and_occluded_frames() {
     }
     // The nearest neighbour of a walk among walks beats a T-pose.
     let mpjpe = |m: Method| report.rows.iter().find(|r| r.method == m).unwrap().metrics.mpjpe_cm;
+    // The true motion's own jitter is the reference row: no error, a walk's (non-zero) jerk.
+    let truth = report.ground_truth.as_ref().expect("segments of 96 frames have jerk");
+    assert_eq!((truth.mpjpe_cm, truth.mpjve_cm_s), (0.0, 0.0));
+    assert!(truth.jitter.is_finite() && truth.jitter > 0.0, "{truth:?}");
+    let rest = report.rows.iter().find(|r| r.method == Method::RestPose).unwrap();
+    assert_ne!(truth.jitter, rest.metrics.jitter);
     assert!(mpjpe(Method::NearestNeighbour) < mpjpe(Method::RestPose));
     // Same seed, same numbers.
     assert_eq!(report, evaluate(&lib, &engine, &options, &mut |_, _| {}).unwrap());
     let table = format_table(&report);
     assert!(table.contains("occluded frames") && table.contains("ego-exo-ungated"), "{table}");
+    assert!(table.contains("(ground truth)"), "{table}");
     let json = serde_json::to_value(&report).unwrap();
-    for key in ["tracking", "observers", "subjects", "frames", "rows", "occluded_rows"] {
+    for key in ["tracking", "observers", "subjects", "frames", "rows", "occluded_rows", "ground_truth"] {
         assert!(json.get(key).is_some(), "--json lacks {key}");
     }
     assert!(json["rows"][0].get("mpjve_cm_s").is_some());

@@ -127,6 +127,8 @@ def main():
     parser.add_argument("--hidden", type=int, default=32)
     parser.add_argument("--max-observers", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--output-smoothing", type=float, default=1.0, metavar="SIGMA",
+                        help="the fusion network's output low-pass (frames), as the shipped networks have")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     if not args.random_init:
@@ -136,7 +138,8 @@ def main():
     for points in (1, 3):
         egonet = EgoNet(WINDOW, args.hidden)
         gate = Gate(GATE_FEATURE_DIM, args.hidden)
-        fusion = Fusion(WINDOW, args.hidden, heads=4, spatial_layers=1, temporal_layers=1, dropout=0.0)
+        fusion = Fusion(WINDOW, args.hidden, heads=4, spatial_layers=1, temporal_layers=1, dropout=0.0,
+                        output_smoothing=args.output_smoothing)
         entry, ref = export_model_set(egonet, gate, fusion, points, args.max_observers, args.hidden, args.out,
                                       f"{points}pt", seed=args.seed + points)
         sets.append(entry)

@@ -30,6 +30,20 @@ EXO_TOKEN_LAYOUT_VERSION = 2
 MASKED = -1.0e4
 
 
+def gaussian_smoothing_matrix(frames: int, sigma: float) -> torch.Tensor:
+    """``S [frames, frames]`` with ``S @ x`` a Gaussian low-pass over time (standard deviation
+    `sigma` frames), each row renormalised over the frames inside the window so a constant
+    sequence is unchanged up to its edges. ``sigma = 0`` gives the identity."""
+    if sigma < 0:
+        raise ValueError(f"sigma must be >= 0 frames, got {sigma}")
+    if sigma == 0:
+        return torch.eye(frames)
+    t = torch.arange(frames, dtype=torch.float32)
+    weights = torch.exp(-0.5 * ((t.unsqueeze(1) - t.unsqueeze(0)) / sigma) ** 2)
+    weights = weights * (weights >= math.exp(-0.5 * 9.0))  # truncated at 3 sigma
+    return weights / weights.sum(dim=1, keepdim=True)
+
+
 def sinusoidal_encoding(length: int, dim: int) -> torch.Tensor:
     """The Transformer's fixed sinusoidal positional encoding, ``[length, dim]``."""
     position = torch.arange(length, dtype=torch.float32).unsqueeze(1)
@@ -127,11 +141,19 @@ class EncoderLayer(nn.Module):
 class Fusion(nn.Module):
     """Ego/exo tokens -> spatial transformer over [ego, exo_1..exo_N] (ego output kept) ->
     temporal transformer with learned positions -> root and body 6D. Predicts a residual on
-    EgoNet's coarse pose, so with every observer masked it refines the ego-only estimate."""
+    EgoNet's coarse pose, so with every observer masked it refines the ego-only estimate.
+
+    `output_smoothing` > 0 ends the network with a fixed Gaussian low-pass over the window's
+    frames (standard deviation in frames; `gaussian_smoothing_matrix`) on the 6D outputs, part
+    of the trained and exported graph: the transformer's frame-to-frame flicker is filtered
+    out and the losses see the filtered motion."""
 
     def __init__(self, frames: int = 96, hidden: int = 128, heads: int = 4, spatial_layers: int = 2,
-                 temporal_layers: int = 3, dropout: float = 0.1, exo_embed: str = "linear"):
+                 temporal_layers: int = 3, dropout: float = 0.1, exo_embed: str = "linear",
+                 output_smoothing: float = 0.0):
         super().__init__()
+        self.output_smoothing = output_smoothing
+        self.register_buffer("smoothing", gaussian_smoothing_matrix(frames, output_smoothing), persistent=False)
         self.ego_token = nn.Linear(EGO_DIM + POSE_DIM, hidden)
         # The paper projects the rays linearly; "mlp" adds a hidden layer (same width) so each
         # observer's 13 rays are combined non-linearly before the spatial transformer.
@@ -163,4 +185,8 @@ class Fusion(nn.Module):
         for layer in self.temporal:
             x = layer(x)
         x = self.norm(x)
-        return egonet[..., :ROOT_DIM] + self.root_head(x), egonet[..., ROOT_DIM:] + self.body_head(x)
+        root = egonet[..., :ROOT_DIM] + self.root_head(x)
+        body = egonet[..., ROOT_DIM:] + self.body_head(x)
+        if self.output_smoothing > 0:
+            root, body = self.smoothing @ root, self.smoothing @ body
+        return root, body

@@ -59,7 +59,8 @@ def main():
     gate = Gate(config["gate_features"], config["gate_hidden"])
     gate.load_state_dict(state["gate"])
     fusion = Fusion(config["window"], config["hidden"], config["heads"], config["spatial_layers"],
-                    config["temporal_layers"], dropout=0.0, exo_embed=config.get("exo_embed", "linear"))
+                    config["temporal_layers"], dropout=0.0, exo_embed=config.get("exo_embed", "linear"),
+                    output_smoothing=config.get("output_smoothing", 0.0))
     fusion.load_state_dict(state["fusion"])
     points = 3 if config["tracking"] == "three_point" else 1
     if ego_config["tracking"] != config["tracking"]:
@@ -85,8 +86,8 @@ def main():
         "fusion": {k: config[k] for k in ("steps", "batch", "lr", "seed", "hidden", "heads", "spatial_layers",
                                           "temporal_layers", "gate_hidden", "train_seconds", "trainable_parameters",
                                           "train_windows")}
-                   | {k: config.get(k) for k in ("velocity_weight", "acceleration_weight", "gate_dropout", "dropout",
-                                                 "exo_embed")},
+                   | {k: config.get(k) for k in ("velocity_weight", "acceleration_weight", "gate_dropout", "gate_aux_weight", "dropout",
+                                                 "exo_embed", "output_smoothing")},
         "shards": config["shard_index"],
         "commit": git_commit(),
     }

@@ -184,6 +184,8 @@ def main():
     parser.add_argument("--dropout", type=float, default=0.1, help="fusion transformer dropout")
     parser.add_argument("--exo-embed", choices=["linear", "mlp"], default="linear",
                         help="exo token projection: linear (the paper) or a two-layer MLP")
+    parser.add_argument("--output-smoothing", type=float, default=0.0, metavar="SIGMA",
+                        help="fusion: a fixed Gaussian low-pass over time on the outputs, SIGMA frames (0 = off)")
     parser.add_argument("--steps", type=int, default=3000)
     parser.add_argument("--batch", type=int, default=32)
     parser.add_argument("--lr", type=float, default=1e-3)
@@ -194,6 +196,8 @@ def main():
                         help="weight of an L1 loss on frame-to-frame joint displacements (not in the paper; 0 = off)")
     parser.add_argument("--acceleration-weight", type=float, default=0.0,
                         help="weight of an L1 loss on second differences of joint positions (not in the paper; 0 = off)")
+    parser.add_argument("--gate-aux-weight", type=float, default=GATE_AUX_WEIGHT,
+                        help="stage 2: weight of the BCE pulling the gate towards 'visible and not occluded'")
     parser.add_argument("--gate-dropout", type=float, default=GATE_DROPOUT,
                         help="stage 2: fraction of training windows whose gate is replaced by the validity mask")
     args = parser.parse_args()
@@ -222,7 +226,7 @@ def main():
         features = train_data["gate_features"].shape[-1]
         gate_net = Gate(features, args.gate_hidden)
         fusion = Fusion(window, args.hidden, args.heads, args.spatial_layers, args.temporal_layers,
-                        dropout=args.dropout, exo_embed=args.exo_embed)
+                        dropout=args.dropout, exo_embed=args.exo_embed, output_smoothing=args.output_smoothing)
         modules.update({"gate": gate_net, "fusion": fusion})
         params = list(gate_net.parameters()) + list(fusion.parameters())
     total_params = sum(p.numel() for p in params)
@@ -266,8 +270,8 @@ def main():
         ls = pose_losses(root, body, batch["target"], batch["target_positions"], batch["rest_joints"], batch["frame_mask"])
         loss = (ROOT_WEIGHT * ls.root + BODY_WEIGHT * ls.body + POSITION_WEIGHT * ls.position
                 + args.velocity_weight * ls.velocity + args.acceleration_weight * ls.acceleration)
-        if args.stage == "fusion":
-            loss = loss + GATE_AUX_WEIGHT * gate_aux_loss(modules["gate"], batch)
+        if args.stage == "fusion" and args.gate_aux_weight > 0:
+            loss = loss + args.gate_aux_weight * gate_aux_loss(modules["gate"], batch)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(params, 1.0)

@@ -4,7 +4,7 @@
 import pytest
 import torch
 
-from egoexo_train.model import EXO_TOKEN_DIM, EgoNet, Fusion, Gate
+from egoexo_train.model import EXO_TOKEN_DIM, EgoNet, Fusion, Gate, gaussian_smoothing_matrix
 
 
 def test_shapes_and_gate_range():
@@ -50,3 +50,43 @@ def test_fusion_inputs_follow_the_engine_exo_layout():
     assert torch.equal(exo[..., 3:6], batch["ray_offsets"] * g)
     assert torch.equal(exo[..., 6:7], g)
     assert (exo[:, :, 2] == 0).all() and (gate[batch["ray_valid"] == 0] == 0).all()
+
+
+def jerk(x: torch.Tensor) -> torch.Tensor:
+    """Mean magnitude of third differences over time (dim -2)."""
+    d = x[..., 3:, :] - 3 * x[..., 2:-1, :] + 3 * x[..., 1:-2, :] - x[..., :-3, :]
+    return d.abs().mean()
+
+
+def test_smoothing_matrix_keeps_constants_and_filters_flicker():
+    assert torch.equal(gaussian_smoothing_matrix(96, 0.0), torch.eye(96))
+    s = gaussian_smoothing_matrix(96, 1.0)
+    assert torch.allclose(s.sum(dim=1), torch.ones(96))
+    assert torch.allclose(s[10:86, 10:86], s[10:86, 10:86].T)  # symmetric away from the edges
+    constant = torch.full((96, 4), 0.7)
+    assert torch.allclose(s @ constant, constant, atol=1e-6)
+    # A straight line is kept inside the window (the kernel is symmetric there).
+    line = torch.arange(96, dtype=torch.float32).unsqueeze(1)
+    assert torch.allclose((s @ line)[3:93], line[3:93], atol=1e-4)
+    torch.manual_seed(3)
+    slow = torch.sin(torch.linspace(0, 6.0, 96)).unsqueeze(1)
+    noisy = slow + 0.05 * torch.randn(96, 1)
+    assert jerk(s @ noisy) < 0.2 * jerk(noisy)
+    assert (s @ noisy - slow).abs().mean() < (noisy - slow).abs().mean()
+    with pytest.raises(ValueError):
+        gaussian_smoothing_matrix(96, -1.0)
+
+
+def test_fusion_output_smoothing_is_the_fixed_low_pass_of_the_unsmoothed_network():
+    torch.manual_seed(4)
+    plain = Fusion(96, 32, 4, 1, 1, dropout=0.0).eval()
+    smoothed = Fusion(96, 32, 4, 1, 1, dropout=0.0, output_smoothing=1.0).eval()
+    smoothed.load_state_dict(plain.state_dict())  # the low-pass has no weights of its own
+    ego, egonet = torch.randn(1, 96, 60), torch.randn(1, 96, 132)
+    exo, mask = torch.randn(1, 96, 2, 13, EXO_TOKEN_DIM), torch.ones(1, 96, 2)
+    with torch.no_grad():
+        root, body = plain(ego, egonet, exo, mask)
+        root_s, body_s = smoothed(ego, egonet, exo, mask)
+    s = gaussian_smoothing_matrix(96, 1.0)
+    assert torch.allclose(root_s, s @ root, atol=1e-5) and torch.allclose(body_s, s @ body, atol=1e-5)
+    assert jerk(body_s) < 0.5 * jerk(body)

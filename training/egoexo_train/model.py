@@ -4,9 +4,10 @@ Tensor layouts (row-major, batch first, T = 96 frames, N observer slots, K = 13 
 
 - EgoNet: ``ego [B,T,60]`` -> ``root_6d [B,T,6]``, ``body_6d [B,T,126]`` (window frame).
 - Gate: ``gate_features [B,T,N,K,F]`` -> ``gate [B,T,N,K]`` in [0, 1].
-- Fusion: ``ego [B,T,60]``, ``egonet [B,T,132]``, ``exo [B,T,N,K,7]`` (exo token layout v2:
+- Fusion: ``ego [B,T,60]``, ``egonet [B,T,132]``, ``exo [B,T,N,K,7]`` (exo token layout v3:
   the gated ray endpoint xyz in the wearer head frame, the gated offset xyz from EgoNet's
-  coarse keypoint to its ray in the window frame, and the gate), ``observer_mask [B,T,N]``
+  coarse keypoint to its ray in the window frame, and the gate; the Rust core low-passes
+  endpoints and offsets over each keypoint's detections before they reach the shards), ``observer_mask [B,T,N]``
   (1 = present) -> ``root_6d [B,T,6]``, ``body_6d [B,T,126]``.
 
 6D rotations are the first two *columns* of the rotation matrix, as in the Rust core.
@@ -24,9 +25,9 @@ POSE_DIM = 132
 ROOT_DIM = 6
 BODY_DIM = 126
 K = 13
-#: Numbers per keypoint in the exo input (`EXO_TOKEN_DIM`, layout v2, in `egoexo-infer`).
+#: Numbers per keypoint in the exo input (`EXO_TOKEN_DIM`, layout v3, in `egoexo-infer`).
 EXO_TOKEN_DIM = 7
-EXO_TOKEN_LAYOUT_VERSION = 2
+EXO_TOKEN_LAYOUT_VERSION = 3
 MASKED = -1.0e4
 
 

@@ -40,7 +40,7 @@ GATE_DROPOUT = 0.25
 EGO_KEYS = ["ego", "target", "frame_mask", "rest_joints"]
 BATCH_KEYS_EXTRA = ["target_positions"]
 #: The shard format this code reads (`SHARD_FORMAT_VERSION` in `egoexo-dataset`).
-SHARD_FORMAT_VERSION = 2
+SHARD_FORMAT_VERSION = 3
 FUSION_KEYS = EGO_KEYS + ["egonet", "rays", "ray_offsets", "ray_valid", "gate_features", "observer_mask", "occluded"]
 
 

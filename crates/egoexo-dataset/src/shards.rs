@@ -31,8 +31,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::DatasetError;
 
-/// Version of the shard format. v2 added `ray_offsets`.
-pub const SHARD_FORMAT_VERSION: u32 = 2;
+/// Version of the shard format. v2 added `ray_offsets`; v3 low-passes `rays` and
+/// `ray_offsets` over each keypoint's detections (exo token layout v3).
+pub const SHARD_FORMAT_VERSION: u32 = 3;
 
 /// Which networks the shards train.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

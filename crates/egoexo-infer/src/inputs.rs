@@ -8,7 +8,8 @@
 //!   then the 21 body rotations 6D ([`POSE_DIM`]).
 //! - `gate_features` `[1, T, N, K, F]` — [`egoexo_core::gate_features`] layout v1.
 //! - `rays` `[1, T, N, K, 3]` — canonical ray endpoints in the wearer's head frame (metres),
-//!   zero when invalid; `ray_valid` `[1, T, N, K]`.
+//!   zero when invalid; `ray_valid` `[1, T, N, K]`. Endpoints and offsets are low-passed over
+//!   each keypoint's detections in the window (σ = [`EXO_TRACK_SMOOTHING_FRAMES`]).
 //! - `ray_offsets` `[1, T, N, K, 3]` — from each of EgoNet's coarse keypoints to its detection's
 //!   viewing ray, perpendicular to the ray, in window-frame axes (metres), zero when invalid
 //!   ([`egoexo_core::rays::ViewingRay::offset_from`]).
@@ -31,6 +32,7 @@ use egoexo_core::region::{DEFAULT_REGION_MARGIN, propose_region};
 use egoexo_core::rigid::RigidTransform;
 use egoexo_core::rotation::Rot6d;
 use egoexo_core::skeleton::{NUM_BODY_JOINTS, NUM_JOINTS, SmplJoint, SmplPose, SmplSkeleton};
+use egoexo_core::tracks::smooth_track_over_valid_frames;
 use egoexo_session::align::AlignedSession;
 
 use crate::InferError;
@@ -221,9 +223,31 @@ pub fn exo_window(
             }
             exo.observer_mask[t * slots + slot] = f32::from(u8::from(valid.iter().any(|&v| v)));
         }
+        for k in 0..EXO_KEYPOINT_COUNT {
+            smooth_keypoint_track(&mut exo, slot, k);
+        }
     }
     exo
 }
+
+/// Low-pass of one keypoint's rays over the window (exo token layout v3): the ray endpoints
+/// and the ray offsets of the frames where it was detected, each a Gaussian over the
+/// neighbouring detections ([`EXO_TRACK_SMOOTHING_FRAMES`]); frames without a detection stay
+/// empty. Detector noise is independent from frame to frame, the motion is not.
+fn smooth_keypoint_track(exo: &mut ExoWindow, slot: usize, k: usize) {
+    let indices: Vec<usize> = (0..WINDOW).map(|t| exo.index(t, slot, k)).collect();
+    let valid: Vec<bool> = indices.iter().map(|&i| exo.ray_valid[i] > 0.0).collect();
+    for track in [&mut exo.rays, &mut exo.ray_offsets] {
+        let mut values: Vec<Vec3> = indices.iter().map(|&i| Vec3::from_slice(&track[3 * i..3 * i + 3])).collect();
+        smooth_track_over_valid_frames(&mut values, &valid, EXO_TRACK_SMOOTHING_FRAMES);
+        for (&i, v) in indices.iter().zip(&values) {
+            track[3 * i..3 * i + 3].copy_from_slice(&v.to_array());
+        }
+    }
+}
+
+/// Standard deviation, in frames, of the temporal low-pass on each keypoint's rays (layout v3).
+pub const EXO_TRACK_SMOOTHING_FRAMES: f32 = 2.0;
 
 fn project(camera: &CameraCalibration, t_world_device: &RigidTransform, p: Vec3) -> Option<egoexo_core::glam::Vec2> {
     camera.project_world(p, t_world_device)
@@ -231,8 +255,9 @@ fn project(camera: &CameraCalibration, t_world_device: &RigidTransform, p: Vec3)
 
 /// Version of the exo token layout (the fusion network's `exo` input per keypoint). v1: the
 /// gated ray endpoint and the gate (4 numbers, the paper's); v2: the gated ray endpoint, the
-/// gated ray offset and the gate (7 numbers).
-pub const EXO_TOKEN_LAYOUT_VERSION: u32 = 2;
+/// gated ray offset and the gate (7 numbers); v3: as v2, with each keypoint's endpoints and
+/// offsets low-passed over the window's frames first (`smooth_keypoint_track`).
+pub const EXO_TOKEN_LAYOUT_VERSION: u32 = 3;
 
 /// Numbers per keypoint in the exo input, layout [`EXO_TOKEN_LAYOUT_VERSION`].
 pub const EXO_TOKEN_DIM: usize = 7;
@@ -310,5 +335,66 @@ mod tests {
             ]
         );
         assert!(out[EXO_TOKEN_DIM * invalid..EXO_TOKEN_DIM * (invalid + 1)].iter().all(|&v| v == 0.0));
+    }
+
+    #[test]
+    fn keypoint_tracks_are_low_passed_over_their_own_detections_only() {
+        // Slot 0, keypoint 2: a detection flickering ±2 cm about a fixed point every frame,
+        // with frames 40..50 undetected (zero). Every other track is a distinct constant.
+        let slots = 2;
+        let n = WINDOW * slots * EXO_KEYPOINT_COUNT;
+        let mut exo = ExoWindow {
+            slots,
+            slot_observer: vec![Some(0), Some(1)],
+            rays: vec![0.0; 3 * n],
+            ray_offsets: vec![0.0; 3 * n],
+            ray_valid: vec![1.0; n],
+            gate_features: vec![0.0; n * GATE_FEATURE_DIM],
+            observer_mask: vec![1.0; WINDOW * slots],
+        };
+        let centre = Vec3::new(0.3, -0.5, 1.0);
+        for t in 0..WINDOW {
+            for slot in 0..slots {
+                for k in 0..EXO_KEYPOINT_COUNT {
+                    let i = exo.index(t, slot, k);
+                    let value = if (slot, k) == (0, 2) {
+                        if (40..50).contains(&t) {
+                            exo.ray_valid[i] = 0.0;
+                            Vec3::ZERO
+                        } else {
+                            centre + Vec3::X * if t % 2 == 0 { 0.02 } else { -0.02 }
+                        }
+                    } else {
+                        Vec3::splat((slot * EXO_KEYPOINT_COUNT + k) as f32)
+                    };
+                    exo.rays[3 * i..3 * i + 3].copy_from_slice(&value.to_array());
+                    exo.ray_offsets[3 * i..3 * i + 3].copy_from_slice(&(-value).to_array());
+                }
+            }
+        }
+        let before = exo.clone();
+        for slot in 0..slots {
+            for k in 0..EXO_KEYPOINT_COUNT {
+                smooth_keypoint_track(&mut exo, slot, k);
+            }
+        }
+        let at = |v: &[f32], i: usize| Vec3::from_slice(&v[3 * i..3 * i + 3]);
+        for t in 0..WINDOW {
+            let i = exo.index(t, 0, 2);
+            if (40..50).contains(&t) {
+                assert_eq!((at(&exo.rays, i), exo.ray_valid[i]), (Vec3::ZERO, 0.0), "gaps stay empty");
+            } else if (10..34).contains(&t) || (56..90).contains(&t) {
+                assert!(at(&exo.rays, i).distance(centre) < 1e-3, "frame {t}: {}", at(&exo.rays, i));
+                assert!(at(&exo.ray_offsets, i).distance(-centre) < 1e-3, "frame {t}");
+            }
+        }
+        for slot in 0..slots {
+            for k in (0..EXO_KEYPOINT_COUNT).filter(|&k| (slot, k) != (0, 2)) {
+                for t in 0..WINDOW {
+                    let i = exo.index(t, slot, k);
+                    assert!(at(&exo.rays, i).distance(at(&before.rays, i)) < 1e-5, "({slot}, {k}) frame {t}");
+                }
+            }
+        }
     }
 }

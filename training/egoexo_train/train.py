@@ -11,8 +11,9 @@ small simulated dataset needs, both documented in the model card:
 - observer dropout (all observers masked for 15 % of windows, each observer for 15 %), so the
   same network runs ego-only;
 - gate dropout (the gate replaced by the plain validity mask for 25 % of windows), so the
-  ungated ablation is in-distribution, plus an auxiliary BCE (x 0.1) pulling the gate towards
-  the simulator's "visible and not occluded" labels.
+  ungated ablation is in-distribution, and optionally an auxiliary BCE (`--gate-aux-weight`,
+  0.1 by default, 0 for the shipped models) pulling the gate towards the simulator's
+  "visible and not occluded" labels.
 
 Example (the exact commands are in training/README.md):
     python -m egoexo_train.train --stage ego --shards data/ego3 --val data/val-ego3 --out runs/ego3 --steps 3000

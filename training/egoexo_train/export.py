@@ -128,7 +128,8 @@ def main():
     parser.add_argument("--max-observers", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--output-smoothing", type=float, default=1.0, metavar="SIGMA",
-                        help="the fusion network's output low-pass (frames), as the shipped networks have")
+                        help="the fusion network's output low-pass (frames), kept in the fixture so the "
+                             "parity tests cover it")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     if not args.random_init:

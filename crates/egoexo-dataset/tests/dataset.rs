@@ -124,7 +124,7 @@ fn fusion_shards_need_an_egonet_and_carry_the_exo_side() {
     );
     assert_eq!(index.egonet_sha256.as_deref(), Some(models.manifest.egonet.sha256.as_str()));
 
-    // numpy reads them as the training code does, with the documented shapes and ranges.
+    // numpy reads them with the documented shapes and ranges, and the training code loads them.
     let dir = std::env::temp_dir().join(format!("egoexo-shards-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     for (name, bytes) in &files {
@@ -161,9 +161,19 @@ for entry in index["shards"]:
     assert 0 < np.abs(z["ray_offsets"]).max() < 10
     assert (z["gate_features"][..., 0] >= 0).all() and (z["gate_features"][..., 0] <= 1).all()
     assert (z["observer_mask"] == (z["ray_valid"].max(axis=-1) > 0)).all()
+# The training code itself accepts them (shard format version, keys, FK of the targets).
+from pathlib import Path
+from egoexo_train.train import FUSION_KEYS, load_shards
+assert load_shards(Path(folder), FUSION_KEYS)["rays"].shape[0] == W
 print(W)
 "#;
-    let out = Command::new(python()).arg("-c").arg(script).arg(&dir).output().unwrap();
+    let out = Command::new(python())
+        .arg("-c")
+        .arg(script)
+        .arg(&dir)
+        .env("PYTHONPATH", workspace_root().join("training"))
+        .output()
+        .unwrap();
     std::fs::remove_dir_all(&dir).ok();
     assert!(out.status.success(), "numpy check failed:\n{}", String::from_utf8_lossy(&out.stderr));
     assert_eq!(String::from_utf8_lossy(&out.stdout).trim(), index.windows.to_string());
@@ -207,13 +217,13 @@ fn evaluation_scores_every_method_on_all_and_occluded_frames() {
     }
     // The nearest neighbour of a walk among walks beats a T-pose.
     let mpjpe = |m: Method| report.rows.iter().find(|r| r.method == m).unwrap().metrics.mpjpe_cm;
+    assert!(mpjpe(Method::NearestNeighbour) < mpjpe(Method::RestPose));
     // The true motion's own jitter is the reference row: no error, a walk's (non-zero) jerk.
     let truth = report.ground_truth.as_ref().expect("segments of 96 frames have jerk");
     assert_eq!((truth.mpjpe_cm, truth.mpjve_cm_s), (0.0, 0.0));
     assert!(truth.jitter.is_finite() && truth.jitter > 0.0, "{truth:?}");
     let rest = report.rows.iter().find(|r| r.method == Method::RestPose).unwrap();
     assert_ne!(truth.jitter, rest.metrics.jitter);
-    assert!(mpjpe(Method::NearestNeighbour) < mpjpe(Method::RestPose));
     // Same seed, same numbers.
     assert_eq!(report, evaluate(&lib, &engine, &options, &mut |_, _| {}).unwrap());
     let table = format_table(&report);

@@ -7,8 +7,8 @@ Tensor layouts (row-major, batch first, T = 96 frames, N observer slots, K = 13 
 - Fusion: ``ego [B,T,60]``, ``egonet [B,T,132]``, ``exo [B,T,N,K,7]`` (exo token layout v3:
   the gated ray endpoint xyz in the wearer head frame, the gated offset xyz from EgoNet's
   coarse keypoint to its ray in the window frame, and the gate; the Rust core low-passes
-  endpoints and offsets over each keypoint's detections before they reach the shards), ``observer_mask [B,T,N]``
-  (1 = present) -> ``root_6d [B,T,6]``, ``body_6d [B,T,126]``.
+  endpoints and offsets over each keypoint's detections before they reach the shards),
+  ``observer_mask [B,T,N]`` (1 = present) -> ``root_6d [B,T,6]``, ``body_6d [B,T,126]``.
 
 6D rotations are the first two *columns* of the rotation matrix, as in the Rust core.
 Attention is written out with plain matmuls so the ONNX export is a small, portable op set

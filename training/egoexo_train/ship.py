@@ -86,8 +86,8 @@ def main():
         "fusion": {k: config[k] for k in ("steps", "batch", "lr", "seed", "hidden", "heads", "spatial_layers",
                                           "temporal_layers", "gate_hidden", "train_seconds", "trainable_parameters",
                                           "train_windows")}
-                   | {k: config.get(k) for k in ("velocity_weight", "acceleration_weight", "gate_dropout", "gate_aux_weight", "dropout",
-                                                 "exo_embed", "output_smoothing")},
+                   | {k: config.get(k) for k in ("velocity_weight", "acceleration_weight", "gate_dropout",
+                                                 "gate_aux_weight", "dropout", "exo_embed", "output_smoothing")},
         "shards": config["shard_index"],
         "commit": git_commit(),
     }

@@ -32,7 +32,7 @@ def test_masked_observers_do_not_change_the_output(exo_embed):
 
 
 def test_fusion_inputs_follow_the_engine_exo_layout():
-    # egoexo-infer's `gated_exo` (exo token layout v2): per keypoint, the ray endpoint and the
+    # egoexo-infer's `gated_exo` (exo token layout v3): per keypoint, the ray endpoint and the
     # ray offset each scaled by the gate, then the gate; masked observers are all zero.
     from egoexo_train.train import fusion_inputs
 

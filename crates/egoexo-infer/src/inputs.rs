@@ -230,6 +230,9 @@ pub fn exo_window(
     exo
 }
 
+/// Standard deviation, in frames, of the temporal low-pass on each keypoint's rays (layout v3).
+pub const EXO_TRACK_SMOOTHING_FRAMES: f32 = 2.0;
+
 /// Low-pass of one keypoint's rays over the window (exo token layout v3): the ray endpoints
 /// and the ray offsets of the frames where it was detected, each a Gaussian over the
 /// neighbouring detections ([`EXO_TRACK_SMOOTHING_FRAMES`]); frames without a detection stay
@@ -245,9 +248,6 @@ fn smooth_keypoint_track(exo: &mut ExoWindow, slot: usize, k: usize) {
         }
     }
 }
-
-/// Standard deviation, in frames, of the temporal low-pass on each keypoint's rays (layout v3).
-pub const EXO_TRACK_SMOOTHING_FRAMES: f32 = 2.0;
 
 fn project(camera: &CameraCalibration, t_world_device: &RigidTransform, p: Vec3) -> Option<egoexo_core::glam::Vec2> {
     camera.project_world(p, t_world_device)

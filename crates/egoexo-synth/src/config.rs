@@ -142,14 +142,16 @@ pub struct DetectorModel {
     pub frame_miss_probability: f32,
     /// Fewer keypoints than this inside the image: no detection at all.
     pub min_keypoints_in_view: usize,
-    /// Probability that an occluded keypoint is reported at a plausible but wrong place with
-    /// a high score (the failure the learned gate must catch); otherwise it gets a low score.
+    /// Probability that an occlusion episode of a keypoint (its consecutive occluded frames) is
+    /// reported at a plausible but wrong place with a high score throughout (the failure the
+    /// learned gate must catch); otherwise it gets a low score throughout.
     pub occluded_confident_probability: f32,
     /// High score range for confidently wrong occluded keypoints.
     pub occluded_confident_score: (f32, f32),
     /// Low score range for the other occluded keypoints.
     pub occluded_low_score: (f32, f32),
-    /// The 3D displacement (m) of a confidently wrong keypoint from the true joint, uniform.
+    /// The 3D displacement (m) of a confidently wrong keypoint from the true joint, uniform;
+    /// drawn once per occlusion episode.
     pub occluded_displacement_m: (f32, f32),
 }
 

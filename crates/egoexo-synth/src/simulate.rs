@@ -14,7 +14,7 @@ use thiserror::Error;
 
 use crate::cameras::{aria_rgb_camera, wide_pinhole_camera};
 use crate::config::SynthConfig;
-use crate::detector::{coco17_points, detect};
+use crate::detector::{DetectorState, coco17_points, detect};
 use crate::devices::{add_tracking_noise, glasses_pose};
 use crate::observers::simulate_observer;
 use crate::rng::SimRng;
@@ -152,12 +152,13 @@ pub fn simulate(
             confidently_wrong_keypoints: 0,
             mean_distance_m: 0.0,
         };
+        let mut detector = DetectorState::default();
         for (f, joints) in fk.iter().enumerate() {
             let head_rot = joints.rotations[SmplJoint::Head.index()];
             let exo = exo_keypoints_from_smpl(&joints.positions, head_rot, scale);
             let points = coco17_points(&exo, &joint_pose(f, SmplJoint::Head), scale);
             let t = f as f32 / fps;
-            let det = detect(&points, &camera, &track.head[f], &scene, t, &config.detector, &mut orng);
+            let det = detect(&points, &camera, &track.head[f], &scene, t, &config.detector, &mut detector, &mut orng);
             report.frames_in_view += usize::from(det.in_view >= config.detector.min_keypoints_in_view);
             report.frames_detected += usize::from(det.keypoints.iter().any(Option::is_some));
             report.occluded_keypoints += det.occluded.count_ones() as usize;

@@ -317,6 +317,54 @@ fn furniture_occludes_and_fools_the_detector_with_confident_wrong_keypoints() {
 }
 
 #[test]
+fn an_occlusion_episode_fools_the_detector_the_same_way_on_every_frame() {
+    // A real detector behind the same occluder repeats its mistake; mistakes drawn afresh each
+    // frame would average out over time and teach the networks to ignore them.
+    let motion = walking_circle(20.0);
+    let mut config = clean_config();
+    config.occlusion.furniture_probability = 1.0;
+    config.occlusion.max_bystanders = 0;
+    let (mut kind_kept, mut kind_changed) = (0usize, 0usize);
+    let (mut wrong_offsets, mut offset_steps) = (vec![], vec![]);
+    for seed in 0..10 {
+        let sim = simulate(&motion, "clip", &config, seed).unwrap();
+        let masks = &sim.session.ground_truth.as_ref().unwrap().occlusion[0].occluded;
+        let track = sim.session.observers[0].keypoints.as_ref().unwrap();
+        let mut previous: [Option<(bool, egoexo_core::glam::Vec2)>; EXO_KEYPOINT_COUNT] = [None; EXO_KEYPOINT_COUNT];
+        for f in 0..motion.len() {
+            let truth = true_pixels(&sim, 0, f);
+            for k in ExoKeypoint::ALL {
+                let now = match (track.frames[f][k.coco17_index()], truth[k.index()]) {
+                    (Some(kp), Some(true_px)) if masks[f] & (1 << k.index()) != 0 => {
+                        Some((kp.score >= 0.6, kp.pixel - true_px))
+                    }
+                    _ => None,
+                };
+                if let (Some((was_confident, before)), Some((confident, offset))) = (previous[k.index()], now) {
+                    if was_confident == confident {
+                        kind_kept += 1;
+                    } else {
+                        kind_changed += 1;
+                    }
+                    if confident && was_confident {
+                        wrong_offsets.push(offset.length());
+                        offset_steps.push((offset - before).length());
+                    }
+                }
+                previous[k.index()] = now;
+            }
+        }
+    }
+    assert!(kind_kept > 50, "{kind_kept} consecutive occluded detections");
+    assert_eq!(kind_changed, 0, "an episode is confidently wrong or low-score throughout");
+    let (offset, step) = (median(wrong_offsets), median(offset_steps));
+    assert!(
+        step < 0.3 * offset,
+        "a confidently wrong keypoint stays where it was: {offset} px off the joint, moving {step} px per frame"
+    );
+}
+
+#[test]
 fn bystanders_walk_between_observer_and_wearer() {
     let motion = walking_circle(20.0);
     let mut config = clean_config();

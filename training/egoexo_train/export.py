@@ -18,8 +18,8 @@ from .model import EGO_DIM, EXO_TOKEN_DIM, EXO_TOKEN_LAYOUT_VERSION, K, POSE_DIM
 WINDOW = 96
 OPSET = 17
 EGO_LAYOUT_VERSION = 1
-GATE_LAYOUT_VERSION = 1
-GATE_FEATURE_DIM = 5
+GATE_LAYOUT_VERSION = 2
+GATE_FEATURE_DIM = 6
 
 
 def tracking_name(points: int) -> str:
@@ -33,6 +33,10 @@ def example_inputs(max_observers: int, generator: torch.Generator):
     egonet = torch.randn(1, WINDOW, POSE_DIM, generator=generator)
     gate_features = torch.rand(1, WINDOW, n, K, GATE_FEATURE_DIM, generator=generator)
     exo = torch.randn(1, WINDOW, n, K, EXO_TOKEN_DIM, generator=generator)
+    # The last number per keypoint is a gate value in [0, 1], 0 (and the ray zero) for about a
+    # fifth of the keypoints, as the engine writes it.
+    valid = (torch.rand(1, WINDOW, n, K, 1, generator=generator) > 0.2).float()
+    exo = torch.cat([exo[..., :-1], torch.rand(1, WINDOW, n, K, 1, generator=generator)], dim=-1) * valid
     mask = (torch.rand(1, WINDOW, n, generator=generator) > 0.4).float()
     return {"ego": ego, "egonet": egonet, "gate_features": gate_features, "exo": exo, "observer_mask": mask}
 
@@ -130,6 +134,9 @@ def main():
     parser.add_argument("--output-smoothing", type=float, default=1.0, metavar="SIGMA",
                         help="the fusion network's output low-pass (frames), kept in the fixture so the "
                              "parity tests cover it")
+    parser.add_argument("--exo-smoothing", type=float, default=2.0, metavar="SIGMA",
+                        help="the fusion network's gate-weighted low-pass of the rays (frames), kept in the "
+                             "fixture so the parity tests cover it")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     if not args.random_init:
@@ -140,7 +147,7 @@ def main():
         egonet = EgoNet(WINDOW, args.hidden)
         gate = Gate(GATE_FEATURE_DIM, args.hidden)
         fusion = Fusion(WINDOW, args.hidden, heads=4, spatial_layers=1, temporal_layers=1, dropout=0.0,
-                        output_smoothing=args.output_smoothing)
+                        output_smoothing=args.output_smoothing, exo_smoothing=args.exo_smoothing)
         entry, ref = export_model_set(egonet, gate, fusion, points, args.max_observers, args.hidden, args.out,
                                       f"{points}pt", seed=args.seed + points)
         sets.append(entry)

@@ -4,11 +4,12 @@ Tensor layouts (row-major, batch first, T = 96 frames, N observer slots, K = 13 
 
 - EgoNet: ``ego [B,T,60]`` -> ``root_6d [B,T,6]``, ``body_6d [B,T,126]`` (window frame).
 - Gate: ``gate_features [B,T,N,K,F]`` -> ``gate [B,T,N,K]`` in [0, 1].
-- Fusion: ``ego [B,T,60]``, ``egonet [B,T,132]``, ``exo [B,T,N,K,7]`` (exo token layout v3:
-  the gated ray endpoint xyz in the wearer head frame, the gated offset xyz from EgoNet's
-  coarse keypoint to its ray in the window frame, and the gate; the Rust core low-passes
-  endpoints and offsets over each keypoint's detections before they reach the shards),
-  ``observer_mask [B,T,N]`` (1 = present) -> ``root_6d [B,T,6]``, ``body_6d [B,T,126]``.
+- Fusion: ``ego [B,T,60]``, ``egonet [B,T,132]``, ``exo [B,T,N,K,7]`` (exo token layout v4:
+  per keypoint and frame, the ray endpoint xyz in the wearer head frame, the offset xyz from
+  EgoNet's coarse keypoint to its ray in the window frame, and the gate, 0 where there is no
+  valid ray), ``observer_mask [B,T,N]`` (1 = present) -> ``root_6d [B,T,6]``,
+  ``body_6d [B,T,126]``. The graph low-passes each keypoint's endpoints and offsets over time
+  weighted by the gate (`gate_weighted_track_smoothing`), then scales them by the gate.
 
 6D rotations are the first two *columns* of the rotation matrix, as in the Rust core.
 Attention is written out with plain matmuls so the ONNX export is a small, portable op set
@@ -25,9 +26,9 @@ POSE_DIM = 132
 ROOT_DIM = 6
 BODY_DIM = 126
 K = 13
-#: Numbers per keypoint in the exo input (`EXO_TOKEN_DIM`, layout v3, in `egoexo-infer`).
+#: Numbers per keypoint in the exo input (`EXO_TOKEN_DIM`, layout v4, in `egoexo-infer`).
 EXO_TOKEN_DIM = 7
-EXO_TOKEN_LAYOUT_VERSION = 3
+EXO_TOKEN_LAYOUT_VERSION = 4
 MASKED = -1.0e4
 
 
@@ -43,6 +44,30 @@ def gaussian_smoothing_matrix(frames: int, sigma: float) -> torch.Tensor:
     weights = torch.exp(-0.5 * ((t.unsqueeze(1) - t.unsqueeze(0)) / sigma) ** 2)
     weights = weights * (weights >= math.exp(-0.5 * 9.0))  # truncated at 3 sigma
     return weights / weights.sum(dim=1, keepdim=True)
+
+
+def gaussian_kernel_matrix(frames: int, sigma: float) -> torch.Tensor:
+    """``W [frames, frames]``, ``W[t, s] = exp(-(t - s)^2 / (2 sigma^2))`` truncated at 3 sigma
+    (unnormalised; `sigma` in frames, > 0)."""
+    if not sigma > 0:
+        raise ValueError(f"sigma must be > 0 frames, got {sigma}")
+    t = torch.arange(frames, dtype=torch.float32)
+    weights = torch.exp(-0.5 * ((t.unsqueeze(1) - t.unsqueeze(0)) / sigma) ** 2)
+    return weights * (weights >= math.exp(-0.5 * 9.0) * (1 - 1e-6))
+
+
+def gate_weighted_track_smoothing(kernel: torch.Tensor, values: torch.Tensor, gate: torch.Tensor) -> torch.Tensor:
+    """Each track's gate-weighted Gaussian mean over time: ``values [B,T,N,K,C]`` and
+    ``gate [B,T,N,K,1]`` (0 where there is no detection) -> ``[B,T,N,K,C]`` with, at frame t,
+    ``sum_s W[t,s] g_s x_s / sum_s W[t,s] g_s`` (``kernel`` = W from `gaussian_kernel_matrix`).
+    A detection the gate rejects (g = 0) leaves its neighbours' means as well as its own frame;
+    with the gate at the validity mask it is the plain low-pass over the detected frames.
+    Frames without a detection get their neighbours' mean (0 if none), which the fusion graph
+    multiplies by their gate, 0: gaps stay empty."""
+    b, t, n, k, c = values.shape
+    weighted = torch.cat([values * gate, gate], dim=-1).reshape(b, t, n * k * (c + 1))
+    summed = (kernel @ weighted).reshape(b, t, n, k, c + 1)
+    return summed[..., :c] / summed[..., c:].clamp(min=1e-6)
 
 
 def sinusoidal_encoding(length: int, dim: int) -> torch.Tensor:
@@ -147,14 +172,21 @@ class Fusion(nn.Module):
     `output_smoothing` > 0 ends the network with a fixed Gaussian low-pass over the window's
     frames (standard deviation in frames; `gaussian_smoothing_matrix`) on the 6D outputs, part
     of the trained and exported graph: the transformer's frame-to-frame flicker is filtered
-    out and the losses see the filtered motion."""
+    out and the losses see the filtered motion.
+
+    `exo_smoothing` > 0 low-passes each keypoint's ray endpoints and offsets over time, weighted
+    by the gate (`gate_weighted_track_smoothing`, standard deviation in frames), before they are
+    scaled by the gate: detector noise is independent from frame to frame, the motion is not."""
 
     def __init__(self, frames: int = 96, hidden: int = 128, heads: int = 4, spatial_layers: int = 2,
                  temporal_layers: int = 3, dropout: float = 0.1, exo_embed: str = "linear",
-                 output_smoothing: float = 0.0):
+                 output_smoothing: float = 0.0, exo_smoothing: float = 0.0):
         super().__init__()
         self.output_smoothing = output_smoothing
         self.register_buffer("smoothing", gaussian_smoothing_matrix(frames, output_smoothing), persistent=False)
+        self.exo_smoothing = exo_smoothing
+        if exo_smoothing > 0:
+            self.register_buffer("exo_kernel", gaussian_kernel_matrix(frames, exo_smoothing), persistent=False)
         self.ego_token = nn.Linear(EGO_DIM + POSE_DIM, hidden)
         # The paper projects the rays linearly; "mlp" adds a hidden layer (same width) so each
         # observer's 13 rays are combined non-linearly before the spatial transformer.
@@ -176,6 +208,10 @@ class Fusion(nn.Module):
     def forward(self, ego, egonet, exo, observer_mask):
         b, t, n = observer_mask.shape
         ego_tok = self.ego_token(torch.cat([ego, egonet], dim=-1)) + self.token_type[0]
+        rays, gate = exo[..., :EXO_TOKEN_DIM - 1], exo[..., EXO_TOKEN_DIM - 1:]
+        if self.exo_smoothing > 0:
+            rays = gate_weighted_track_smoothing(self.exo_kernel, rays, gate)
+        exo = torch.cat([rays * gate, gate], dim=-1)
         exo_tok = self.exo_token(exo.reshape(b, t, n, K * EXO_TOKEN_DIM)) + self.token_type[1]
         tokens = torch.cat([ego_tok.unsqueeze(2), exo_tok], dim=2).reshape(b * t, n + 1, -1)
         present = torch.cat([torch.ones_like(observer_mask[..., :1]), observer_mask], dim=-1).reshape(b * t, n + 1)

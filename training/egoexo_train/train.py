@@ -12,8 +12,8 @@ small simulated dataset needs, both documented in the model card:
   same network runs ego-only;
 - gate dropout (the gate replaced by the plain validity mask for 25 % of windows), so the
   ungated ablation is in-distribution, and optionally an auxiliary BCE (`--gate-aux-weight`,
-  0.1 by default, 0 for the shipped models) pulling the gate towards the simulator's
-  "visible and not occluded" labels.
+  0.1 by default, 0 for the shipped models) pulling the gate towards 1 where the ray passes
+  within 0.15 m of the true joint (the shards' `ray_error` label) and towards 0 elsewhere.
 
 Example (the exact commands are in training/README.md):
     python -m egoexo_train.train --stage ego --shards data/ego3 --val data/val-ego3 --out runs/ego3 --steps 3000
@@ -41,8 +41,12 @@ GATE_DROPOUT = 0.25
 EGO_KEYS = ["ego", "target", "frame_mask", "rest_joints"]
 BATCH_KEYS_EXTRA = ["target_positions"]
 #: The shard format this code reads (`SHARD_FORMAT_VERSION` in `egoexo-dataset`).
-SHARD_FORMAT_VERSION = 3
-FUSION_KEYS = EGO_KEYS + ["egonet", "rays", "ray_offsets", "ray_valid", "gate_features", "observer_mask", "occluded"]
+SHARD_FORMAT_VERSION = 4
+FUSION_KEYS = EGO_KEYS + ["egonet", "rays", "ray_offsets", "ray_valid", "gate_features", "observer_mask", "occluded",
+                          "ray_error"]
+#: A ray counts as accurate for the gate's auxiliary loss when it passes this close (metres)
+#: to the true keypoint (the shards' `ray_error`, computed by the Rust core).
+ACCURATE_RAY_M = 0.15
 
 
 def parse_fold(text: str) -> tuple:
@@ -143,14 +147,16 @@ def fusion_inputs(batch, gate_net, train: bool, generator: torch.Generator,
         ungated = (torch.rand(b, 1, 1, 1, generator=generator) < gate_dropout).float()
         gate = ungated * valid + (1.0 - ungated) * gate
     gate = gate * mask.unsqueeze(-1)
-    g = gate.unsqueeze(-1)
-    exo = torch.cat([batch["rays"] * g, batch["ray_offsets"] * g, g], dim=-1)
+    v = valid.unsqueeze(-1)
+    exo = torch.cat([batch["rays"] * v, batch["ray_offsets"] * v, gate.unsqueeze(-1)], dim=-1)
     return exo, mask, gate
 
 
 def gate_aux_loss(gate_net, batch):
+    """BCE pulling the gate towards 1 for rays that pass within `ACCURATE_RAY_M` of the true
+    keypoint and towards 0 for the others (valid rays only)."""
     valid = batch["ray_valid"]
-    target = valid * (1.0 - batch["occluded"])
+    target = valid * (batch["ray_error"] < ACCURATE_RAY_M).float()
     g = gate_net(batch["gate_features"]).clamp(1e-5, 1 - 1e-5)
     bce = -(target * g.log() + (1 - target) * (1 - g).log())
     return (bce * valid).sum() / valid.sum().clamp(min=1.0)
@@ -187,6 +193,8 @@ def main():
                         help="exo token projection: linear (the paper) or a two-layer MLP")
     parser.add_argument("--output-smoothing", type=float, default=0.0, metavar="SIGMA",
                         help="fusion: a fixed Gaussian low-pass over time on the outputs, SIGMA frames (0 = off)")
+    parser.add_argument("--exo-smoothing", type=float, default=0.0, metavar="SIGMA",
+                        help="fusion: a gate-weighted Gaussian low-pass over time on each keypoint's rays, SIGMA frames (0 = off)")
     parser.add_argument("--steps", type=int, default=3000)
     parser.add_argument("--batch", type=int, default=32)
     parser.add_argument("--lr", type=float, default=1e-3)
@@ -198,7 +206,8 @@ def main():
     parser.add_argument("--acceleration-weight", type=float, default=0.0,
                         help="weight of an L1 loss on second differences of joint positions (not in the paper; 0 = off)")
     parser.add_argument("--gate-aux-weight", type=float, default=GATE_AUX_WEIGHT,
-                        help="stage 2: weight of the BCE pulling the gate towards 'visible and not occluded'")
+                        help="stage 2: weight of the BCE pulling the gate towards 'the ray passes within "
+                             f"{ACCURATE_RAY_M} m of the true keypoint'")
     parser.add_argument("--gate-dropout", type=float, default=GATE_DROPOUT,
                         help="stage 2: fraction of training windows whose gate is replaced by the validity mask")
     args = parser.parse_args()
@@ -227,7 +236,8 @@ def main():
         features = train_data["gate_features"].shape[-1]
         gate_net = Gate(features, args.gate_hidden)
         fusion = Fusion(window, args.hidden, args.heads, args.spatial_layers, args.temporal_layers,
-                        dropout=args.dropout, exo_embed=args.exo_embed, output_smoothing=args.output_smoothing)
+                        dropout=args.dropout, exo_embed=args.exo_embed, output_smoothing=args.output_smoothing,
+                        exo_smoothing=args.exo_smoothing)
         modules.update({"gate": gate_net, "fusion": fusion})
         params = list(gate_net.parameters()) + list(fusion.parameters())
     total_params = sum(p.numel() for p in params)

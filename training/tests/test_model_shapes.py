@@ -4,7 +4,8 @@
 import pytest
 import torch
 
-from egoexo_train.model import EXO_TOKEN_DIM, EgoNet, Fusion, Gate, gaussian_smoothing_matrix
+from egoexo_train.model import (EXO_TOKEN_DIM, EgoNet, Fusion, Gate, gaussian_kernel_matrix, gaussian_smoothing_matrix,
+                                gate_weighted_track_smoothing)
 
 
 def test_shapes_and_gate_range():
@@ -32,8 +33,9 @@ def test_masked_observers_do_not_change_the_output(exo_embed):
 
 
 def test_fusion_inputs_follow_the_engine_exo_layout():
-    # egoexo-infer's `gated_exo` (exo token layout v3): per keypoint, the ray endpoint and the
-    # ray offset each scaled by the gate, then the gate; masked observers are all zero.
+    # egoexo-infer's `fusion_exo_input` (exo token layout v4): per keypoint, the ray endpoint
+    # and the ray offset (zero where the ray is invalid), then the gate; masked observers'
+    # gates are zero (the fusion graph weights and scales the rays by the gate).
     from egoexo_train.train import fusion_inputs
 
     torch.manual_seed(2)
@@ -45,11 +47,12 @@ def test_fusion_inputs_follow_the_engine_exo_layout():
     }
     exo, mask, gate = fusion_inputs(batch, Gate(5, 16), False, torch.Generator().manual_seed(0))
     assert exo.shape == (b, t, n, k, EXO_TOKEN_DIM) == (b, t, n, k, 7)
-    g = gate.unsqueeze(-1)
-    assert torch.equal(exo[..., 0:3], batch["rays"] * g)
-    assert torch.equal(exo[..., 3:6], batch["ray_offsets"] * g)
-    assert torch.equal(exo[..., 6:7], g)
-    assert (exo[:, :, 2] == 0).all() and (gate[batch["ray_valid"] == 0] == 0).all()
+    v = batch["ray_valid"].unsqueeze(-1)
+    assert torch.equal(exo[..., 0:3], batch["rays"] * v)
+    assert torch.equal(exo[..., 3:6], batch["ray_offsets"] * v)
+    assert torch.equal(exo[..., 6:7], gate.unsqueeze(-1))
+    assert (exo[:, :, 2, :, 6] == 0).all() and (gate[batch["ray_valid"] == 0] == 0).all()
+    assert (exo[..., :6][batch["ray_valid"] == 0] == 0).all()
 
 
 def jerk(x: torch.Tensor) -> torch.Tensor:
@@ -90,3 +93,35 @@ def test_fusion_output_smoothing_is_the_fixed_low_pass_of_the_unsmoothed_network
     s = gaussian_smoothing_matrix(96, 1.0)
     assert torch.allclose(root_s, s @ root, atol=1e-5) and torch.allclose(body_s, s @ body, atol=1e-5)
     assert jerk(body_s) < 0.5 * jerk(body)
+
+
+def test_gate_weighted_track_smoothing_low_passes_detections_and_drops_rejected_ones():
+    kernel = gaussian_kernel_matrix(96, 2.0)
+    assert (kernel[50] > 0).sum() == 13  # truncated at 3 sigma: 6 frames either side
+    torch.manual_seed(5)
+    t = torch.arange(96, dtype=torch.float32)
+    # Keypoint 0: a straight line with ±2 cm flicker; a 10-frame gap; one outlier at frame 70.
+    truth = torch.stack([0.01 * t, 0.5 - 0.002 * t, torch.full_like(t, 1.2)], dim=-1)
+    track = truth + 0.02 * torch.tensor([1.0, -1.0, 0.5]) * torch.where(t % 2 == 0, 1.0, -1.0).unsqueeze(-1)
+    track[70] += torch.tensor([0.4, -0.3, 0.2])
+    detected = ((t < 40) | (t >= 50)).float()
+    values = torch.zeros(1, 96, 1, 2, 3)
+    values[0, :, 0, 0] = track * detected.unsqueeze(-1)
+    values[0, :, 0, 1] = torch.randn(3)  # keypoint 1: a constant
+    gate = torch.ones(1, 96, 1, 2, 1)
+    gate[0, :, 0, 0, 0] = detected
+    plain = gate_weighted_track_smoothing(kernel, values, gate)
+    assert torch.allclose(plain[0, :, 0, 1], values[0, :, 0, 1], atol=1e-6)  # constants kept
+    inner = [f for f in range(8, 88) if not 34 <= f < 56 and not 63 <= f < 78]
+    assert (plain[0, inner, 0, 0] - truth[inner]).abs().max() < 2e-3  # flicker removed, line kept
+    assert ((plain * gate)[0, 40:50, 0, 0] == 0).all()  # gated by 0, the gaps stay empty in the token
+    assert (plain[0, 68, 0, 0] - truth[68]).norm() > 0.04  # the outlier leaks into its neighbours
+    gate[0, 70, 0, 0, 0] = 0.0  # ... unless the gate rejects it
+    gated = gate_weighted_track_smoothing(kernel, values, gate)
+    # (within the flicker that no longer cancels around the missing frame)
+    assert (gated[0, 64:77, 0, 0] - truth[64:77]).norm(dim=-1).max() < 0.01
+    # The valid-masked low-pass is the gate-weighted one with the gate at the validity mask,
+    # and scaling every gate by the same factor changes nothing.
+    assert torch.allclose(gate_weighted_track_smoothing(kernel, values, 0.3 * gate), gated, atol=1e-6)
+    with pytest.raises(ValueError):
+        gaussian_kernel_matrix(96, 0.0)

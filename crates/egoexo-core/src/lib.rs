@@ -35,7 +35,6 @@ pub mod region;
 pub mod rigid;
 pub mod rotation;
 pub mod skeleton;
-pub mod tracks;
 
 pub use camera::{CameraCalibration, CameraError, Fisheye624, Pinhole, Projection};
 pub use ego_features::{EgoFeatureLayout, EgoTrajectories, TrackingMode};

@@ -8,7 +8,9 @@
 //!   `egonet [W,T,132]`, `rays [W,T,N,K,3]` (wearer head frame), `ray_offsets [W,T,N,K,3]`
 //!   (window frame, [`egoexo_infer::inputs`]), `ray_valid [W,T,N,K]`,
 //!   `gate_features [W,T,N,K,F]`, `observer_mask [W,T,N]`, and the simulator's labels
-//!   `occluded [W,T,N,K]` (1 = the keypoint was hidden by furniture or a bystander).
+//!   `occluded [W,T,N,K]` (1 = the keypoint was hidden by furniture or a bystander) and
+//!   `ray_error [W,T,N,K]` (metres: how far the detection's viewing ray passes from the true
+//!   keypoint, 0 where there is no valid ray) — labels for training and diagnostics only.
 //!
 //! Poses are 6D (first two matrix columns) with the root orientation in the window frame;
 //! positions in metres. `index.json` lists the shards and records the layouts, options and
@@ -31,9 +33,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::DatasetError;
 
-/// Version of the shard format. v2 added `ray_offsets`; v3 low-passes `rays` and
-/// `ray_offsets` over each keypoint's detections (exo token layout v3).
-pub const SHARD_FORMAT_VERSION: u32 = 3;
+/// Version of the shard format. v2 added `ray_offsets`; v3 low-passed `rays` and
+/// `ray_offsets` over each keypoint's detections (exo token layout v3); v4 stores them raw
+/// again, per frame (exo token layout v4: the fusion graph does the gate-weighted low-pass),
+/// and adds the `ray_error` labels.
+pub const SHARD_FORMAT_VERSION: u32 = 4;
 
 /// Which networks the shards train.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -124,6 +128,7 @@ struct Buffer {
     gate_features: Vec<f32>,
     observer_mask: Vec<f32>,
     occluded: Vec<f32>,
+    ray_error: Vec<f32>,
 }
 
 impl Buffer {
@@ -149,6 +154,7 @@ impl Buffer {
             npz.add("gate_features", &[w, t, n, k, GATE_FEATURE_DIM as u64], &self.gate_features).map_err(io)?;
             npz.add("observer_mask", &[w, t, n], &self.observer_mask).map_err(io)?;
             npz.add("occluded", &[w, t, n, k], &self.occluded).map_err(io)?;
+            npz.add("ray_error", &[w, t, n, k], &self.ray_error).map_err(io)?;
         }
         let bytes = npz.finish().map_err(|e| DatasetError::Write(e.to_string()))?;
         *self = Buffer::default();
@@ -302,6 +308,13 @@ fn add_windows(
                 }
             }
             buffer.occluded.extend_from_slice(&occluded);
+            // The same rays' offsets from the true pose's keypoints instead of EgoNet's: their
+            // lengths are the rays' distances from the true keypoints.
+            let truth_world = world_poses(&window, &target, &aligned.skeleton, aligned.head_joint_in_device);
+            let truth = exo_window(aligned, &window, &truth_world, &observers, slots);
+            buffer.ray_error.extend(truth.ray_offsets.chunks_exact(3).zip(&truth.ray_valid).map(|(offset, valid)| {
+                if *valid > 0.0 { (offset[0] * offset[0] + offset[1] * offset[1] + offset[2] * offset[2]).sqrt() } else { 0.0 }
+            }));
         }
         buffer.windows += 1;
     }

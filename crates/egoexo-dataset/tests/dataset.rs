@@ -144,7 +144,8 @@ for entry in index["shards"]:
     shapes = {"ego": (w, T, 60), "target": (w, T, 132), "frame_mask": (w, T), "rest_joints": (w, 24, 3),
               "egonet": (w, T, 132), "rays": (w, T, N, K, 3), "ray_offsets": (w, T, N, K, 3),
               "ray_valid": (w, T, N, K),
-              "gate_features": (w, T, N, K, 5), "observer_mask": (w, T, N), "occluded": (w, T, N, K)}
+              "gate_features": (w, T, N, K, 6), "observer_mask": (w, T, N), "occluded": (w, T, N, K),
+              "ray_error": (w, T, N, K)}
     for key, shape in shapes.items():
         assert z[key].shape == shape, (key, z[key].shape, shape)
         assert z[key].dtype == np.float32, (key, z[key].dtype)
@@ -161,6 +162,12 @@ for entry in index["shards"]:
     assert 0 < np.abs(z["ray_offsets"]).max() < 10
     assert (z["gate_features"][..., 0] >= 0).all() and (z["gate_features"][..., 0] <= 1).all()
     assert (z["observer_mask"] == (z["ray_valid"].max(axis=-1) > 0)).all()
+    # Distances of the rays from the true keypoints: zero where invalid; the rays of visible
+    # keypoints pass within centimetres of them (detector and device noise).
+    valid = z["ray_valid"] > 0
+    assert (z["ray_error"][~valid] == 0).all() and (z["ray_error"] >= 0).all()
+    visible = valid & (z["occluded"] == 0)
+    assert visible.any() and np.median(z["ray_error"][visible]) < 0.10, np.median(z["ray_error"][visible])
 # The training code itself accepts them (shard format version, keys, FK of the targets).
 from pathlib import Path
 from egoexo_train.train import FUSION_KEYS, load_shards

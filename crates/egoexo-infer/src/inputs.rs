@@ -6,16 +6,16 @@
 //! - `ego` `[1, T, 60]` — [`egoexo_core::ego_features`] layout v1, window frame.
 //! - `egonet` `[1, T, 132]` — EgoNet's coarse pose in the window frame: root orientation 6D
 //!   then the 21 body rotations 6D ([`POSE_DIM`]).
-//! - `gate_features` `[1, T, N, K, F]` — [`egoexo_core::gate_features`] layout v1.
+//! - `gate_features` `[1, T, N, K, F]` — [`egoexo_core::gate_features`] layout v2.
 //! - `rays` `[1, T, N, K, 3]` — canonical ray endpoints in the wearer's head frame (metres),
-//!   zero when invalid; `ray_valid` `[1, T, N, K]`. Endpoints and offsets are low-passed over
-//!   each keypoint's detections in the window (σ = [`EXO_TRACK_SMOOTHING_FRAMES`]).
+//!   zero when invalid; `ray_valid` `[1, T, N, K]`.
 //! - `ray_offsets` `[1, T, N, K, 3]` — from each of EgoNet's coarse keypoints to its detection's
 //!   viewing ray, perpendicular to the ray, in window-frame axes (metres), zero when invalid
 //!   ([`egoexo_core::rays::ViewingRay::offset_from`]).
 //! - `exo` `[1, T, N, K, 7]` — the fusion network's exo input, exo token layout
-//!   [`EXO_TOKEN_LAYOUT_VERSION`]: the ray endpoint and the ray offset, each scaled by the gate,
-//!   then the gate ([`gated_exo`]).
+//!   [`EXO_TOKEN_LAYOUT_VERSION`]: the ray endpoint, the ray offset, then the gate
+//!   ([`fusion_exo_input`]); the fusion graph does the gate-weighted temporal low-pass and the
+//!   scaling by the gate.
 //! - `observer_mask` `[1, T, N]` — 1 where the slot holds an observer whose head is tracked and
 //!   at least one ray is valid at that frame.
 //!
@@ -25,14 +25,13 @@
 use egoexo_core::camera::CameraCalibration;
 use egoexo_core::ego_features::{EGO_FEATURE_DIM, EgoTrajectories, TrackingMode, ego_features};
 use egoexo_core::exo_keypoints::{EXO_KEYPOINT_COUNT, exo_keypoints_from_smpl};
-use egoexo_core::gate_features::{GATE_FEATURE_DIM, gate_features};
+use egoexo_core::gate_features::{GATE_FEATURE_DIM, detection_jumps, gate_features};
 use egoexo_core::glam::{Quat, Vec3};
 use egoexo_core::rays::canonicalize_keypoints_with_offsets;
 use egoexo_core::region::{DEFAULT_REGION_MARGIN, propose_region};
 use egoexo_core::rigid::RigidTransform;
 use egoexo_core::rotation::Rot6d;
 use egoexo_core::skeleton::{NUM_BODY_JOINTS, NUM_JOINTS, SmplJoint, SmplPose, SmplSkeleton};
-use egoexo_core::tracks::smooth_track_over_valid_frames;
 use egoexo_session::align::AlignedSession;
 
 use crate::InferError;
@@ -191,28 +190,46 @@ pub fn exo_window(
     let coarse_fk: Vec<_> = coarse.iter().map(|p| skeleton.forward_kinematics(p)).collect();
     for (slot, observer_index) in exo.slot_observer.clone().into_iter().enumerate() {
         let Some(observer) = observer_index.and_then(|o| aligned.observers.get(o)) else { continue };
-        for t in 0..window.plan.len() {
-            let frame = window.plan.frames.start + t;
-            if !observer.head.valid.get(frame).copied().unwrap_or(false) {
-                continue;
-            }
-            let observer_pose = &observer.head.poses[frame];
-            let fk = &coarse_fk[t];
-            let region =
-                propose_region(&fk.positions[..NUM_JOINTS], &observer.camera, observer_pose, DEFAULT_REGION_MARGIN);
-            let predicted_points = exo_keypoints_from_smpl(&fk.positions, fk.rotations[SmplJoint::Head.index()], scale);
-            let predicted = predicted_points.map(|p| project(&observer.camera, observer_pose, p));
-            let detected = &observer.keypoints[frame];
-            let rays_and_offsets = canonicalize_keypoints_with_offsets(
-                detected,
-                &observer.camera,
-                observer_pose,
-                &window.head[t],
-                &predicted_points,
-                window.t_world_window.rotation,
-            );
+        // Per frame: detections, EgoNet's predicted pixels, region, rays (None: head not tracked).
+        let frames: Vec<_> = (0..window.plan.len())
+            .map(|t| {
+                let frame = window.plan.frames.start + t;
+                if !observer.head.valid.get(frame).copied().unwrap_or(false) {
+                    return None;
+                }
+                let observer_pose = &observer.head.poses[frame];
+                let fk = &coarse_fk[t];
+                let region =
+                    propose_region(&fk.positions[..NUM_JOINTS], &observer.camera, observer_pose, DEFAULT_REGION_MARGIN);
+                let predicted_points =
+                    exo_keypoints_from_smpl(&fk.positions, fk.rotations[SmplJoint::Head.index()], scale);
+                let predicted = predicted_points.map(|p| project(&observer.camera, observer_pose, p));
+                let detected = &observer.keypoints[frame];
+                let rays_and_offsets = canonicalize_keypoints_with_offsets(
+                    detected,
+                    &observer.camera,
+                    observer_pose,
+                    &window.head[t],
+                    &predicted_points,
+                    window.t_world_window.rotation,
+                );
+                Some((detected, predicted, region, rays_and_offsets))
+            })
+            .collect();
+        let diagonals: Vec<Option<f32>> =
+            frames.iter().map(|f| f.as_ref().and_then(|(_, _, region, _)| region.bbox()).map(|b| b.diagonal())).collect();
+        let jumps: Vec<Vec<f32>> = (0..EXO_KEYPOINT_COUNT)
+            .map(|k| {
+                let pixels: Vec<_> =
+                    frames.iter().map(|f| f.as_ref().and_then(|(detected, ..)| detected[k]).map(|kp| kp.pixel)).collect();
+                detection_jumps(&pixels, &diagonals)
+            })
+            .collect();
+        for (t, frame) in frames.iter().enumerate() {
+            let Some((detected, predicted, region, rays_and_offsets)) = frame else { continue };
             let valid = rays_and_offsets.map(|(r, _)| r.valid);
-            let features = gate_features(detected, &valid, &predicted, &observer.camera, &region);
+            let jumps_now = std::array::from_fn(|k| jumps[k][t]);
+            let features = gate_features(detected, &valid, predicted, &observer.camera, region, &jumps_now);
             for k in 0..EXO_KEYPOINT_COUNT {
                 let i = exo.index(t, slot, k);
                 let (ray, offset) = rays_and_offsets[k];
@@ -223,30 +240,8 @@ pub fn exo_window(
             }
             exo.observer_mask[t * slots + slot] = f32::from(u8::from(valid.iter().any(|&v| v)));
         }
-        for k in 0..EXO_KEYPOINT_COUNT {
-            smooth_keypoint_track(&mut exo, slot, k);
-        }
     }
     exo
-}
-
-/// Standard deviation, in frames, of the temporal low-pass on each keypoint's rays (layout v3).
-pub const EXO_TRACK_SMOOTHING_FRAMES: f32 = 2.0;
-
-/// Low-pass of one keypoint's rays over the window (exo token layout v3): the ray endpoints
-/// and the ray offsets of the frames where it was detected, each a Gaussian over the
-/// neighbouring detections ([`EXO_TRACK_SMOOTHING_FRAMES`]); frames without a detection stay
-/// empty. Detector noise is independent from frame to frame, the motion is not.
-fn smooth_keypoint_track(exo: &mut ExoWindow, slot: usize, k: usize) {
-    let indices: Vec<usize> = (0..WINDOW).map(|t| exo.index(t, slot, k)).collect();
-    let valid: Vec<bool> = indices.iter().map(|&i| exo.ray_valid[i] > 0.0).collect();
-    for track in [&mut exo.rays, &mut exo.ray_offsets] {
-        let mut values: Vec<Vec3> = indices.iter().map(|&i| Vec3::from_slice(&track[3 * i..3 * i + 3])).collect();
-        smooth_track_over_valid_frames(&mut values, &valid, EXO_TRACK_SMOOTHING_FRAMES);
-        for (&i, v) in indices.iter().zip(&values) {
-            track[3 * i..3 * i + 3].copy_from_slice(&v.to_array());
-        }
-    }
 }
 
 fn project(camera: &CameraCalibration, t_world_device: &RigidTransform, p: Vec3) -> Option<egoexo_core::glam::Vec2> {
@@ -255,25 +250,29 @@ fn project(camera: &CameraCalibration, t_world_device: &RigidTransform, p: Vec3)
 
 /// Version of the exo token layout (the fusion network's `exo` input per keypoint). v1: the
 /// gated ray endpoint and the gate (4 numbers, the paper's); v2: the gated ray endpoint, the
-/// gated ray offset and the gate (7 numbers); v3: as v2, with each keypoint's endpoints and
-/// offsets low-passed over the window's frames first (`smooth_keypoint_track`).
-pub const EXO_TOKEN_LAYOUT_VERSION: u32 = 3;
+/// gated ray offset and the gate (7 numbers); v3: as v2, each keypoint's endpoints and offsets
+/// low-passed over its detections in the window before the gate; v4: the raw ray endpoint, the
+/// raw ray offset and the gate (7 numbers) — the fusion graph itself low-passes each track
+/// weighted by the gate and then scales it by the gate, so a gated-out detection also leaves
+/// its neighbours' averages.
+pub const EXO_TOKEN_LAYOUT_VERSION: u32 = 4;
 
 /// Numbers per keypoint in the exo input, layout [`EXO_TOKEN_LAYOUT_VERSION`].
 pub const EXO_TOKEN_DIM: usize = 7;
 
-/// `[T, N, K, 7]` fusion input: each ray endpoint and ray offset scaled by its gate value, then
-/// the gate value.
-pub fn gated_exo(exo: &ExoWindow, gate: &[f32]) -> Vec<f32> {
+/// `[T, N, K, 7]` fusion input (exo token layout v4): each keypoint's ray endpoint and ray
+/// offset, then its gate value; all zero where the ray is invalid. The fusion graph weights,
+/// low-passes and scales the rays by the gate; `gate` forced to 1 is the ungated ablation.
+pub fn fusion_exo_input(exo: &ExoWindow, gate: &[f32]) -> Vec<f32> {
     let mut out = vec![0.0; WINDOW * exo.slots * EXO_KEYPOINT_COUNT * EXO_TOKEN_DIM];
     for i in 0..WINDOW * exo.slots * EXO_KEYPOINT_COUNT {
-        let g = gate[i] * exo.ray_valid[i];
+        let valid = exo.ray_valid[i];
         let token = &mut out[EXO_TOKEN_DIM * i..EXO_TOKEN_DIM * (i + 1)];
         for c in 0..3 {
-            token[c] = g * exo.rays[3 * i + c];
-            token[3 + c] = g * exo.ray_offsets[3 * i + c];
+            token[c] = valid * exo.rays[3 * i + c];
+            token[3 + c] = valid * exo.ray_offsets[3 * i + c];
         }
-        token[6] = g;
+        token[6] = valid * gate[i];
     }
     out
 }
@@ -304,7 +303,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn gated_exo_writes_the_endpoint_the_offset_then_the_gate_and_zeroes_invalid_rays() {
+    fn fusion_exo_input_writes_the_endpoint_the_offset_then_the_gate_and_zeroes_invalid_rays() {
         // The layout `train.py` builds (training/tests/test_model_shapes.py checks that side).
         let slots = 1;
         let n = WINDOW * slots * EXO_KEYPOINT_COUNT;
@@ -319,82 +318,21 @@ mod tests {
             observer_mask: vec![1.0; WINDOW * slots],
         };
         let gate = vec![0.5; n];
-        let out = gated_exo(&exo, &gate);
+        let out = fusion_exo_input(&exo, &gate);
         assert_eq!(out.len(), n * EXO_TOKEN_DIM);
         assert_eq!((exo.index(3, 0, 4), exo.index(3, 0, 5)), (valid, invalid));
         assert_eq!(
             &out[EXO_TOKEN_DIM * valid..EXO_TOKEN_DIM * (valid + 1)],
             &[
-                0.5 * exo.rays[3 * valid],
-                0.5 * exo.rays[3 * valid + 1],
-                0.5 * exo.rays[3 * valid + 2],
-                0.5 * exo.ray_offsets[3 * valid],
-                0.5 * exo.ray_offsets[3 * valid + 1],
-                0.5 * exo.ray_offsets[3 * valid + 2],
+                exo.rays[3 * valid],
+                exo.rays[3 * valid + 1],
+                exo.rays[3 * valid + 2],
+                exo.ray_offsets[3 * valid],
+                exo.ray_offsets[3 * valid + 1],
+                exo.ray_offsets[3 * valid + 2],
                 0.5,
             ]
         );
         assert!(out[EXO_TOKEN_DIM * invalid..EXO_TOKEN_DIM * (invalid + 1)].iter().all(|&v| v == 0.0));
-    }
-
-    #[test]
-    fn keypoint_tracks_are_low_passed_over_their_own_detections_only() {
-        // Slot 0, keypoint 2: a detection flickering ±2 cm about a fixed point every frame,
-        // with frames 40..50 undetected (zero). Every other track is a distinct constant.
-        let slots = 2;
-        let n = WINDOW * slots * EXO_KEYPOINT_COUNT;
-        let mut exo = ExoWindow {
-            slots,
-            slot_observer: vec![Some(0), Some(1)],
-            rays: vec![0.0; 3 * n],
-            ray_offsets: vec![0.0; 3 * n],
-            ray_valid: vec![1.0; n],
-            gate_features: vec![0.0; n * GATE_FEATURE_DIM],
-            observer_mask: vec![1.0; WINDOW * slots],
-        };
-        let centre = Vec3::new(0.3, -0.5, 1.0);
-        for t in 0..WINDOW {
-            for slot in 0..slots {
-                for k in 0..EXO_KEYPOINT_COUNT {
-                    let i = exo.index(t, slot, k);
-                    let value = if (slot, k) == (0, 2) {
-                        if (40..50).contains(&t) {
-                            exo.ray_valid[i] = 0.0;
-                            Vec3::ZERO
-                        } else {
-                            centre + Vec3::X * if t % 2 == 0 { 0.02 } else { -0.02 }
-                        }
-                    } else {
-                        Vec3::splat((slot * EXO_KEYPOINT_COUNT + k) as f32)
-                    };
-                    exo.rays[3 * i..3 * i + 3].copy_from_slice(&value.to_array());
-                    exo.ray_offsets[3 * i..3 * i + 3].copy_from_slice(&(-value).to_array());
-                }
-            }
-        }
-        let before = exo.clone();
-        for slot in 0..slots {
-            for k in 0..EXO_KEYPOINT_COUNT {
-                smooth_keypoint_track(&mut exo, slot, k);
-            }
-        }
-        let at = |v: &[f32], i: usize| Vec3::from_slice(&v[3 * i..3 * i + 3]);
-        for t in 0..WINDOW {
-            let i = exo.index(t, 0, 2);
-            if (40..50).contains(&t) {
-                assert_eq!((at(&exo.rays, i), exo.ray_valid[i]), (Vec3::ZERO, 0.0), "gaps stay empty");
-            } else if (10..34).contains(&t) || (56..90).contains(&t) {
-                assert!(at(&exo.rays, i).distance(centre) < 1e-3, "frame {t}: {}", at(&exo.rays, i));
-                assert!(at(&exo.ray_offsets, i).distance(-centre) < 1e-3, "frame {t}");
-            }
-        }
-        for slot in 0..slots {
-            for k in (0..EXO_KEYPOINT_COUNT).filter(|&k| (slot, k) != (0, 2)) {
-                for t in 0..WINDOW {
-                    let i = exo.index(t, slot, k);
-                    assert!(at(&exo.rays, i).distance(at(&before.rays, i)) < 1e-5, "({slot}, {k}) frame {t}");
-                }
-            }
-        }
     }
 }

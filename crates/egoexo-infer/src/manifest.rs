@@ -36,7 +36,7 @@ pub struct ModelFile {
     pub outputs: Vec<TensorSpec>,
 }
 
-/// The fusion network's per-keypoint exo input ([`crate::inputs::gated_exo`]).
+/// The fusion network's per-keypoint exo input ([`crate::inputs::fusion_exo_input`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ExoTokenLayout {
     pub version: u32,

@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::InferError;
 use crate::baselines::{NearestNeighbourIndex, rest_pose_window};
-use crate::inputs::{EgoWindow, POSE_DIM, ego_window, exo_window, gated_exo, world_poses};
+use crate::inputs::{EgoWindow, POSE_DIM, ego_window, exo_window, fusion_exo_input, world_poses};
 use crate::models::{ModelSet, OnnxModel};
 use crate::windows::{WINDOW, crossfade_weight, plan_windows, valid_spans};
 
@@ -409,7 +409,7 @@ fn run_fusion(
         });
     }
     let gate: Vec<f32> = gate.iter().zip(&exo.ray_valid).map(|(g, v)| g * v).collect();
-    let exo_input = gated_exo(&exo, &gate);
+    let exo_input = fusion_exo_input(&exo, &gate);
     let out = models.fusion.run(&[&window.ego, coarse, &exo_input, &exo.observer_mask])?;
     let poses = concat_pose(models.fusion.name(), &out)?;
     // Report gates per used slot only.

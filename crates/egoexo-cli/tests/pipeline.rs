@@ -122,6 +122,13 @@ fn simulate_inspect_reconstruct_and_evaluate() {
         report["rows"].as_array().unwrap().iter().map(|r| r["method"].as_str().unwrap().to_string()).collect();
     assert_eq!(methods, ["rest-pose", "nearest-neighbour", "ego-only", "ego-exo", "ego-exo-ungated"]);
     assert!(report["occluded_rows"].is_array());
+    // The networks' rows come with clip-paired differences (observers' and gate's effect).
+    let paired = report["paired"].as_array().unwrap();
+    assert!(
+        !paired.is_empty() && paired.iter().all(|p| p["mpjpe_cm"]["low"].as_f64() <= p["mpjpe_cm"]["high"].as_f64())
+    );
+    assert_eq!(paired[0]["method"], "ego-exo");
+    assert_eq!(paired[0]["baseline"], "ego-only");
 }
 
 #[test]

@@ -14,12 +14,13 @@
 //! | 4 | the region proposal found the wearer in this image | {0, 1} |
 //! | 5 | jump: distance between the detected keypoint and the nearer of the same keypoint's detections at the previous and the next frame, divided by the region box's diagonal ([`detection_jumps`]); [`MAX_AGREEMENT`] when there is nothing to compare | [0, 2] |
 //!
-//! The jump is what a single frame cannot show: a keypoint hallucinated at a wrong place
-//! (an occluded joint reported with a high score) lands somewhere else on every frame, while a
-//! true detection moves with the body.
+//! The jump is what a single frame cannot show: a true detection moves smoothly with the
+//! body, while a keypoint hallucinated at a wrong place (an occluded joint reported with a
+//! high score) jumps where the occlusion begins and ends, and wherever the detector's guess
+//! wanders.
 //!
 //! A session that carries per-frame context features (e.g. a DINO CLS token) appends them
-//! after these five; the models' manifest records whether a gate expects them.
+//! after these six; the models' manifest records whether a gate expects them.
 
 use glam::Vec2;
 use serde::{Deserialize, Serialize};

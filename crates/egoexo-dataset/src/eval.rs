@@ -4,6 +4,11 @@
 //!
 //! A frame is *occluded* when at least one of its exo keypoints is hidden from at least one
 //! observer by furniture or a bystander (the simulator's labels).
+//!
+//! Differences of a tenth of a centimetre decide whether the observers or the gate help, so
+//! the report also compares the networks' rows clip by clip ([`PairedComparison`]): the mean
+//! difference and a 95 % bootstrap interval over clips, which says whether a difference is
+//! larger than what the choice of clips alone would produce.
 
 use egoexo_core::TrackingMode;
 use egoexo_core::ego_features::EGO_FEATURE_DIM;
@@ -14,6 +19,7 @@ use egoexo_infer::windows::{WINDOW, plan_windows, valid_spans};
 use egoexo_infer::{Engine, Method, ReconstructOptions};
 use egoexo_mocap::MotionLibrary;
 use egoexo_session::align::{AlignOptions, AlignedSession, align};
+use egoexo_synth::rng::SimRng;
 use egoexo_synth::{SynthConfig, simulate};
 use serde::{Deserialize, Serialize};
 
@@ -55,6 +61,110 @@ pub struct EvalReport {
     /// over-smoothed motion, above it shaky motion. `None` when no segment has 4 frames.
     pub ground_truth: Option<MotionMetrics>,
     pub occluded_ground_truth: Option<MotionMetrics>,
+    /// Clip-paired comparisons between the networks' rows ([`COMPARED_METHODS`]), on all and
+    /// on occluded frames; empty without networks.
+    #[serde(default)]
+    pub paired: Vec<PairedComparison>,
+}
+
+/// The pairs `(method, baseline)` the report compares clip by clip when both were evaluated:
+/// the observers' effect and the gate's.
+pub const COMPARED_METHODS: [(Method, Method); 2] =
+    [(Method::EgoExo, Method::EgoOnly), (Method::EgoExo, Method::EgoExoUngated)];
+
+/// Bootstrap resamples of the clips behind each [`Interval`].
+pub const BOOTSTRAP_RESAMPLES: usize = 2000;
+
+/// `method` minus `baseline` on the same frames of the same clips (negative: `method` has the
+/// lower error).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PairedComparison {
+    pub method: Method,
+    pub baseline: Method,
+    /// `false`: all frames; `true`: the occluded frames.
+    pub occluded: bool,
+    /// Clips with at least one such frame.
+    pub clips: usize,
+    /// Difference of MPJPE, cm.
+    pub mpjpe_cm: Interval,
+    /// Difference of lower-body position error, cm.
+    pub lower_cm: Interval,
+}
+
+/// A frame-weighted mean over clips with its 95 % percentile-bootstrap interval (clips
+/// resampled with replacement).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Interval {
+    pub mean: f64,
+    pub low: f64,
+    pub high: f64,
+}
+
+/// The frame-weighted mean of per-clip `values` (`weights`: each clip's frame count) and its
+/// 95 % percentile-bootstrap interval from `resamples` draws of the clips with replacement.
+/// `None` when the weights sum to zero or the lengths differ.
+pub fn bootstrap_weighted_mean(
+    weights: &[f64],
+    values: &[f64],
+    resamples: usize,
+    rng: &mut SimRng,
+) -> Option<Interval> {
+    let weighted_mean = |picks: &mut dyn Iterator<Item = usize>| {
+        let (mut sum, mut weight) = (0.0, 0.0);
+        for i in picks {
+            sum += weights[i] * values[i];
+            weight += weights[i];
+        }
+        (weight > 0.0).then(|| sum / weight)
+    };
+    if weights.len() != values.len() || weights.is_empty() {
+        return None;
+    }
+    let n = weights.len();
+    let mean = weighted_mean(&mut (0..n))?;
+    let mut draws: Vec<f64> =
+        (0..resamples).filter_map(|_| weighted_mean(&mut (0..n).map(|_| rng.int(0, n - 1)))).collect();
+    if draws.is_empty() {
+        return Some(Interval { mean, low: mean, high: mean });
+    }
+    draws.sort_by(f64::total_cmp);
+    let at = |q: f64| draws[((q * (draws.len() - 1) as f64).round() as usize).min(draws.len() - 1)];
+    Some(Interval { mean, low: at(0.025), high: at(0.975) })
+}
+
+/// Each evaluated method's metrics per clip (all frames, occluded frames; `None` where the
+/// clip has no such frame).
+type ClipMetrics = Vec<[Option<MotionMetrics>; 2]>;
+
+fn paired_comparisons(methods: &[Method], per_clip: &[ClipMetrics], seed: u64) -> Vec<PairedComparison> {
+    let mut out = Vec::new();
+    for (method, baseline) in COMPARED_METHODS {
+        let (Some(a), Some(b)) =
+            (methods.iter().position(|&m| m == method), methods.iter().position(|&m| m == baseline))
+        else {
+            continue;
+        };
+        for (subset, occluded) in [(0, false), (1, true)] {
+            let (mut weights, mut mpjpe, mut lower) = (Vec::new(), Vec::new(), Vec::new());
+            for (ma, mb) in per_clip[a].iter().zip(&per_clip[b]) {
+                if let (Some(ma), Some(mb)) = (&ma[subset], &mb[subset]) {
+                    weights.push(ma.frames as f64);
+                    mpjpe.push(ma.mpjpe_cm - mb.mpjpe_cm);
+                    lower.push(ma.lower_cm - mb.lower_cm);
+                }
+            }
+            // The same resampled clips for both metrics.
+            let stream = mix(seed, 0xB007, (a * 8 + b * 2 + subset) as u64);
+            let (Some(mpjpe_cm), Some(lower_cm)) = (
+                bootstrap_weighted_mean(&weights, &mpjpe, BOOTSTRAP_RESAMPLES, &mut SimRng::new(stream)),
+                bootstrap_weighted_mean(&weights, &lower, BOOTSTRAP_RESAMPLES, &mut SimRng::new(stream)),
+            ) else {
+                continue;
+            };
+            out.push(PairedComparison { method, baseline, occluded, clips: weights.len(), mpjpe_cm, lower_cm });
+        }
+    }
+    out
 }
 
 /// Simulates and aligns clip `clip` for evaluation (deterministic in `seed` and the clip).
@@ -114,6 +224,7 @@ pub fn evaluate(
     let mut all: Vec<MetricsAccumulator> = options.methods.iter().map(|_| MetricsAccumulator::new()).collect();
     let mut occluded: Vec<MetricsAccumulator> = options.methods.iter().map(|_| MetricsAccumulator::new()).collect();
     let (mut truth, mut occluded_truth) = (MetricsAccumulator::new(), MetricsAccumulator::new());
+    let mut per_clip: Vec<ClipMetrics> = options.methods.iter().map(|_| Vec::with_capacity(clips.len())).collect();
     let (mut frames, mut occluded_frames) = (0, 0);
     let protocol = ReconstructOptions {
         method: Method::RestPose,
@@ -142,16 +253,18 @@ pub fn evaluate(
             let r = engine
                 .reconstruct(&aligned, &ReconstructOptions { method, ..protocol }, &mut |_| true)
                 .map_err(|e| DatasetError::Reconstruct { method: method.name(), message: e.to_string() })?;
+            let (mut clip_all, mut clip_occluded) = (MetricsAccumulator::new(), MetricsAccumulator::new());
             for segment in &segments {
                 let range = segment.frames.clone();
-                all[m].add_segment(&r.joints[range.clone()], &gt_joints[range.clone()], aligned.timeline.fps, None)?;
-                occluded[m].add_segment(
-                    &r.joints[range.clone()],
-                    &gt_joints[range.clone()],
-                    aligned.timeline.fps,
-                    Some(&hidden[range]),
-                )?;
+                let (pred, truth, fps) = (&r.joints[range.clone()], &gt_joints[range.clone()], aligned.timeline.fps);
+                for acc in [&mut all[m], &mut clip_all] {
+                    acc.add_segment(pred, truth, fps, None)?;
+                }
+                for acc in [&mut occluded[m], &mut clip_occluded] {
+                    acc.add_segment(pred, truth, fps, Some(&hidden[range.clone()]))?;
+                }
             }
+            per_clip[m].push([clip_all.finish(), clip_occluded.finish()]);
         }
         progress(done + 1, clips.len());
     }
@@ -174,6 +287,7 @@ pub fn evaluate(
         occluded_rows: rows(&occluded),
         ground_truth: truth.finish(),
         occluded_ground_truth: occluded_truth.finish(),
+        paired: paired_comparisons(&options.methods, &per_clip, options.seed),
     })
 }
 
@@ -214,5 +328,62 @@ pub fn format_table(report: &EvalReport) -> String {
             ));
         }
     }
+    if !report.paired.is_empty() {
+        out.push_str("\npaired by clip: mean difference [95 % bootstrap interval over clips], cm\n");
+        for p in &report.paired {
+            let cell = |i: &Interval| format!("{:+.2} [{:+.2}, {:+.2}]", i.mean, i.low, i.high);
+            out.push_str(&format!(
+                "{:<34} {:<16} MPJPE {:<22} L-PE {}\n",
+                format!("{} - {}", p.method.name(), p.baseline.name()),
+                if p.occluded { "occluded frames" } else { "all frames" },
+                cell(&p.mpjpe_cm),
+                cell(&p.lower_cm),
+            ));
+        }
+    }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn interval(weights: &[f64], values: &[f64], seed: u64) -> Option<Interval> {
+        bootstrap_weighted_mean(weights, values, BOOTSTRAP_RESAMPLES, &mut SimRng::new(seed))
+    }
+
+    #[test]
+    fn the_mean_is_weighted_by_frames() {
+        let i = interval(&[1.0, 3.0], &[0.0, 4.0], 1).unwrap();
+        assert!((i.mean - 3.0).abs() < 1e-12, "{i:?}");
+        assert!(i.low <= i.mean && i.mean <= i.high && i.low >= 0.0 && i.high <= 4.0, "{i:?}");
+    }
+
+    #[test]
+    fn equal_differences_leave_no_uncertainty() {
+        let i = interval(&[10.0, 50.0, 96.0], &[-0.25; 3], 1).unwrap();
+        assert!((i.mean + 0.25).abs() < 1e-12 && (i.low + 0.25).abs() < 1e-12 && (i.high + 0.25).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_interval_separates_a_consistent_difference_from_noise() {
+        // 40 clips: a consistent gain of about 1 cm, and differences of either sign.
+        let weights = vec![96.0; 40];
+        let consistent: Vec<f64> = (0..40).map(|i| -1.0 + 0.05 * f64::from(i % 7) - 0.15).collect();
+        let noise: Vec<f64> = (0..40).map(|i| if i % 2 == 0 { 0.5 } else { -0.5 } + 0.01 * f64::from(i % 3)).collect();
+        let gain = interval(&weights, &consistent, 3).unwrap();
+        assert!(gain.high < 0.0, "{gain:?}");
+        let tie = interval(&weights, &noise, 3).unwrap();
+        assert!(tie.low < 0.0 && tie.high > 0.0, "{tie:?}");
+        // Wider spread, wider interval; the same seed, the same interval.
+        assert!(tie.high - tie.low > gain.high - gain.low);
+        assert_eq!(Some(tie), interval(&weights, &noise, 3));
+    }
+
+    #[test]
+    fn nothing_to_average_is_none() {
+        assert_eq!(interval(&[], &[], 1), None);
+        assert_eq!(interval(&[1.0], &[1.0, 2.0], 1), None);
+        assert_eq!(interval(&[0.0, 0.0], &[1.0, 2.0], 1), None);
+    }
 }

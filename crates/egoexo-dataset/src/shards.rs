@@ -313,7 +313,11 @@ fn add_windows(
             let truth_world = world_poses(&window, &target, &aligned.skeleton, aligned.head_joint_in_device);
             let truth = exo_window(aligned, &window, &truth_world, &observers, slots);
             buffer.ray_error.extend(truth.ray_offsets.chunks_exact(3).zip(&truth.ray_valid).map(|(offset, valid)| {
-                if *valid > 0.0 { (offset[0] * offset[0] + offset[1] * offset[1] + offset[2] * offset[2]).sqrt() } else { 0.0 }
+                if *valid > 0.0 {
+                    (offset[0] * offset[0] + offset[1] * offset[1] + offset[2] * offset[2]).sqrt()
+                } else {
+                    0.0
+                }
             }));
         }
         buffer.windows += 1;

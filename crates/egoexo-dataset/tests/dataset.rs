@@ -241,6 +241,35 @@ fn evaluation_scores_every_method_on_all_and_occluded_frames() {
         assert!(json.get(key).is_some(), "--json lacks {key}");
     }
     assert!(json["rows"][0].get("mpjve_cm_s").is_some());
+
+    // Clip-paired differences, for the observers' and the gate's effect on all and occluded
+    // frames: the frame-weighted mean over clips is exactly the rows' difference.
+    let pairs: Vec<_> = report.paired.iter().map(|p| (p.method, p.baseline, p.occluded)).collect();
+    assert_eq!(
+        pairs,
+        [
+            (Method::EgoExo, Method::EgoOnly, false),
+            (Method::EgoExo, Method::EgoOnly, true),
+            (Method::EgoExo, Method::EgoExoUngated, false),
+            (Method::EgoExo, Method::EgoExoUngated, true),
+        ]
+    );
+    for p in &report.paired {
+        let rows = if p.occluded { &report.occluded_rows } else { &report.rows };
+        let row = |m: Method| &rows.iter().find(|r| r.method == m).unwrap().metrics;
+        assert!((p.mpjpe_cm.mean - (row(p.method).mpjpe_cm - row(p.baseline).mpjpe_cm)).abs() < 1e-9, "{p:?}");
+        assert!((p.lower_cm.mean - (row(p.method).lower_cm - row(p.baseline).lower_cm)).abs() < 1e-9, "{p:?}");
+        // One clip: resampling clips cannot move the mean.
+        assert_eq!(p.clips, 1);
+        assert_eq!((p.mpjpe_cm.low, p.mpjpe_cm.high), (p.mpjpe_cm.mean, p.mpjpe_cm.mean));
+    }
+    assert!(table.contains("paired by clip") && table.contains("ego-exo - ego-exo-ungated"), "{table}");
+    assert_eq!(json["paired"].as_array().map(Vec::len), Some(4));
+    // Without networks there is nothing to pair.
+    let baselines = EvalOptions { methods: vec![Method::RestPose, Method::NearestNeighbour], ..options.clone() };
+    let report = evaluate(&lib, &engine, &baselines, &mut |_, _| {}).unwrap();
+    assert!(report.paired.is_empty());
+    assert!(!format_table(&report).contains("paired by clip"));
 }
 
 #[test]

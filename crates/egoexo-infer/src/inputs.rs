@@ -216,12 +216,16 @@ pub fn exo_window(
                 Some((detected, predicted, region, rays_and_offsets))
             })
             .collect();
-        let diagonals: Vec<Option<f32>> =
-            frames.iter().map(|f| f.as_ref().and_then(|(_, _, region, _)| region.bbox()).map(|b| b.diagonal())).collect();
+        let diagonals: Vec<Option<f32>> = frames
+            .iter()
+            .map(|f| f.as_ref().and_then(|(_, _, region, _)| region.bbox()).map(|b| b.diagonal()))
+            .collect();
         let jumps: Vec<Vec<f32>> = (0..EXO_KEYPOINT_COUNT)
             .map(|k| {
-                let pixels: Vec<_> =
-                    frames.iter().map(|f| f.as_ref().and_then(|(detected, ..)| detected[k]).map(|kp| kp.pixel)).collect();
+                let pixels: Vec<_> = frames
+                    .iter()
+                    .map(|f| f.as_ref().and_then(|(detected, ..)| detected[k]).map(|kp| kp.pixel))
+                    .collect();
                 detection_jumps(&pixels, &diagonals)
             })
             .collect();

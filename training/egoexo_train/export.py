@@ -137,6 +137,9 @@ def main():
     parser.add_argument("--exo-smoothing", type=float, default=2.0, metavar="SIGMA",
                         help="the fusion network's gate-weighted low-pass of the rays (frames), kept in the "
                              "fixture so the parity tests cover it")
+    parser.add_argument("--exo-fade", action=argparse.BooleanOptionalAction, default=True,
+                        help="the fusion network fades rays and observers in and out (`faded_exo_tracks`), "
+                             "kept in the fixture so the parity tests cover it")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     if not args.random_init:
@@ -147,7 +150,8 @@ def main():
         egonet = EgoNet(WINDOW, args.hidden)
         gate = Gate(GATE_FEATURE_DIM, args.hidden)
         fusion = Fusion(WINDOW, args.hidden, heads=4, spatial_layers=1, temporal_layers=1, dropout=0.0,
-                        output_smoothing=args.output_smoothing, exo_smoothing=args.exo_smoothing)
+                        output_smoothing=args.output_smoothing, exo_smoothing=args.exo_smoothing,
+                        exo_fade=args.exo_fade)
         entry, ref = export_model_set(egonet, gate, fusion, points, args.max_observers, args.hidden, args.out,
                                       f"{points}pt", seed=args.seed + points)
         sets.append(entry)

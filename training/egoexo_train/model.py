@@ -46,6 +46,11 @@ def gaussian_smoothing_matrix(frames: int, sigma: float) -> torch.Tensor:
     return weights / weights.sum(dim=1, keepdim=True)
 
 
+# With `exo_fade`, an observer counts as present at a frame where its low-passed gates sum
+# to more than this (a tenth of one keypoint's full weight).
+FADE_PRESENT = 0.1
+
+
 def gaussian_kernel_matrix(frames: int, sigma: float) -> torch.Tensor:
     """``W [frames, frames]``, ``W[t, s] = exp(-(t - s)^2 / (2 sigma^2))`` truncated at 3 sigma
     (unnormalised; `sigma` in frames, > 0)."""
@@ -68,6 +73,26 @@ def gate_weighted_track_smoothing(kernel: torch.Tensor, values: torch.Tensor, ga
     weighted = torch.cat([values * gate, gate], dim=-1).reshape(b, t, n * k * (c + 1))
     summed = (kernel @ weighted).reshape(b, t, n, k, c + 1)
     return summed[..., :c] / summed[..., c:].clamp(min=1e-6)
+
+
+def faded_exo_tracks(kernel: torch.Tensor, rays: torch.Tensor, gate: torch.Tensor,
+                     observer_mask: torch.Tensor) -> tuple:
+    """The exo inputs faded in and out over time (`Fusion(exo_fade=True)`): ``rays
+    [B,T,N,K,C]``, ``gate [B,T,N,K,1]`` (0 where there is no detection) and ``observer_mask
+    [B,T,N]`` -> (the gate-weighted low-pass of the rays, `gate_weighted_track_smoothing`;
+    the low-passed gate ``sum_s W[t,s] g_s / sum_s W[t,s]``; the observers present).
+
+    Gates are zeroed where the observer is masked first, so a masked observer stays absent. A
+    ray that appears or vanishes then ramps over about 2 sigma frames instead of stepping,
+    frames without a detection between detections carry a faded-out estimate, and an observer
+    counts as present wherever its low-passed gates sum to more than `FADE_PRESENT` — an
+    observer missed for a frame or two no longer drops out of the spatial transformer."""
+    b, t, n = observer_mask.shape
+    gate = gate * observer_mask.reshape(b, t, n, 1, 1)
+    rays = gate_weighted_track_smoothing(kernel, rays, gate)
+    faded = (kernel @ gate.reshape(b, t, -1)).reshape(gate.shape) / kernel.sum(dim=1).reshape(1, t, 1, 1, 1)
+    present = (faded.sum(dim=(-1, -2)) > FADE_PRESENT).to(faded.dtype)
+    return rays, faded, present
 
 
 def sinusoidal_encoding(length: int, dim: int) -> torch.Tensor:
@@ -176,12 +201,18 @@ class Fusion(nn.Module):
 
     `exo_smoothing` > 0 low-passes each keypoint's ray endpoints and offsets over time, weighted
     by the gate (`gate_weighted_track_smoothing`, standard deviation in frames), before they are
-    scaled by the gate: detector noise is independent from frame to frame, the motion is not."""
+    scaled by the gate: detector noise is independent from frame to frame, the motion is not.
+    `exo_fade` (with `exo_smoothing`) also low-passes the gate itself and derives the observers'
+    presence from it (`faded_exo_tracks`), so rays and observers fade in and out instead of
+    switching on and off."""
 
     def __init__(self, frames: int = 96, hidden: int = 128, heads: int = 4, spatial_layers: int = 2,
                  temporal_layers: int = 3, dropout: float = 0.1, exo_embed: str = "linear",
-                 output_smoothing: float = 0.0, exo_smoothing: float = 0.0):
+                 output_smoothing: float = 0.0, exo_smoothing: float = 0.0, exo_fade: bool = False):
         super().__init__()
+        self.exo_fade = exo_fade
+        if exo_fade and not exo_smoothing > 0:
+            raise ValueError("exo_fade needs exo_smoothing > 0")
         self.output_smoothing = output_smoothing
         self.register_buffer("smoothing", gaussian_smoothing_matrix(frames, output_smoothing), persistent=False)
         self.exo_smoothing = exo_smoothing
@@ -209,7 +240,9 @@ class Fusion(nn.Module):
         b, t, n = observer_mask.shape
         ego_tok = self.ego_token(torch.cat([ego, egonet], dim=-1)) + self.token_type[0]
         rays, gate = exo[..., :EXO_TOKEN_DIM - 1], exo[..., EXO_TOKEN_DIM - 1:]
-        if self.exo_smoothing > 0:
+        if self.exo_fade:
+            rays, gate, observer_mask = faded_exo_tracks(self.exo_kernel, rays, gate, observer_mask)
+        elif self.exo_smoothing > 0:
             rays = gate_weighted_track_smoothing(self.exo_kernel, rays, gate)
         exo = torch.cat([rays * gate, gate], dim=-1)
         exo_tok = self.exo_token(exo.reshape(b, t, n, K * EXO_TOKEN_DIM)) + self.token_type[1]

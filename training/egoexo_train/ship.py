@@ -61,7 +61,7 @@ def main():
     fusion = Fusion(config["window"], config["hidden"], config["heads"], config["spatial_layers"],
                     config["temporal_layers"], dropout=0.0, exo_embed=config.get("exo_embed", "linear"),
                     output_smoothing=config.get("output_smoothing", 0.0),
-                    exo_smoothing=config.get("exo_smoothing", 0.0))
+                    exo_smoothing=config.get("exo_smoothing", 0.0), exo_fade=config.get("exo_fade", False))
     fusion.load_state_dict(state["fusion"])
     points = 3 if config["tracking"] == "three_point" else 1
     if ego_config["tracking"] != config["tracking"]:
@@ -88,7 +88,7 @@ def main():
                                           "temporal_layers", "gate_hidden", "train_seconds", "trainable_parameters",
                                           "train_windows")}
                    | {k: config.get(k) for k in ("velocity_weight", "acceleration_weight", "gate_dropout",
-                                                 "gate_aux_weight", "dropout", "exo_embed", "output_smoothing", "exo_smoothing")},
+                                                 "gate_aux_weight", "dropout", "exo_embed", "output_smoothing", "exo_smoothing", "exo_fade")},
         "shards": config["shard_index"],
         "commit": git_commit(),
     }

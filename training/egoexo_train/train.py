@@ -14,6 +14,8 @@ small simulated dataset needs, both documented in the model card:
   ungated ablation is in-distribution, and optionally an auxiliary BCE (`--gate-aux-weight`,
   0.1 by default, 0 for the shipped models) pulling the gate towards 1 where the ray passes
   within 0.15 m of the true joint (the shards' `ray_error` label) and towards 0 elsewhere.
+The fusion graph can low-pass its exo input over time (`--exo-smoothing`, `--exo-fade`) and
+its output (`--output-smoothing`); see `model.py`.
 
 Example (the exact commands are in training/README.md):
     python -m egoexo_train.train --stage ego --shards data/ego3 --val data/val-ego3 --out runs/ego3 --steps 3000
@@ -195,6 +197,8 @@ def main():
                         help="fusion: a fixed Gaussian low-pass over time on the outputs, SIGMA frames (0 = off)")
     parser.add_argument("--exo-smoothing", type=float, default=0.0, metavar="SIGMA",
                         help="fusion: a gate-weighted Gaussian low-pass over time on each keypoint's rays, SIGMA frames (0 = off)")
+    parser.add_argument("--exo-fade", action="store_true",
+                        help="fusion: scale the low-passed rays by the low-passed gate, so rays fade in and out")
     parser.add_argument("--steps", type=int, default=3000)
     parser.add_argument("--batch", type=int, default=32)
     parser.add_argument("--lr", type=float, default=1e-3)
@@ -237,7 +241,7 @@ def main():
         gate_net = Gate(features, args.gate_hidden)
         fusion = Fusion(window, args.hidden, args.heads, args.spatial_layers, args.temporal_layers,
                         dropout=args.dropout, exo_embed=args.exo_embed, output_smoothing=args.output_smoothing,
-                        exo_smoothing=args.exo_smoothing)
+                        exo_smoothing=args.exo_smoothing, exo_fade=args.exo_fade)
         modules.update({"gate": gate_net, "fusion": fusion})
         params = list(gate_net.parameters()) + list(fusion.parameters())
     total_params = sum(p.numel() for p in params)

@@ -4,8 +4,8 @@
 import pytest
 import torch
 
-from egoexo_train.model import (EXO_TOKEN_DIM, EgoNet, Fusion, Gate, gaussian_kernel_matrix, gaussian_smoothing_matrix,
-                                gate_weighted_track_smoothing)
+from egoexo_train.model import (EXO_TOKEN_DIM, EgoNet, Fusion, Gate, faded_exo_tracks, gaussian_kernel_matrix,
+                                gaussian_smoothing_matrix, gate_weighted_track_smoothing)
 
 
 def test_shapes_and_gate_range():
@@ -17,10 +17,11 @@ def test_shapes_and_gate_range():
     assert gate.shape == (2, 96, 3, 13) and (gate >= 0).all() and (gate <= 1).all()
 
 
-@pytest.mark.parametrize("exo_embed", ["linear", "mlp"])
-def test_masked_observers_do_not_change_the_output(exo_embed):
+@pytest.mark.parametrize("exo_embed,fade", [("linear", False), ("mlp", False), ("linear", True)])
+def test_masked_observers_do_not_change_the_output(exo_embed, fade):
     torch.manual_seed(1)
-    fusion = Fusion(96, 32, 4, 1, 1, dropout=0.0, exo_embed=exo_embed).eval()
+    fusion = Fusion(96, 32, 4, 1, 1, dropout=0.0, exo_embed=exo_embed, exo_smoothing=2.0 if fade else 0.0,
+                    exo_fade=fade).eval()
     ego, egonet = torch.randn(1, 96, 60), torch.randn(1, 96, 132)
     exo = torch.randn(1, 96, 3, 13, EXO_TOKEN_DIM)
     mask = torch.tensor([1.0, 0.0, 0.0]).expand(1, 96, 3).clone()
@@ -125,3 +126,38 @@ def test_gate_weighted_track_smoothing_low_passes_detections_and_drops_rejected_
     assert torch.allclose(gate_weighted_track_smoothing(kernel, values, 0.3 * gate), gated, atol=1e-6)
     with pytest.raises(ValueError):
         gaussian_kernel_matrix(96, 0.0)
+
+
+def test_faded_exo_tracks_ramp_rays_in_and_out_and_bridge_missed_frames():
+    kernel = gaussian_kernel_matrix(96, 2.0)
+    t = torch.arange(96)
+    # Observer 0: keypoint 0 detected from frame 40 on at a constant place, the whole observer
+    # missed at frame 60. Observer 1: detections everywhere, but masked (dropped) throughout.
+    rays = torch.zeros(1, 96, 2, 2, 6)
+    gate = torch.zeros(1, 96, 2, 2, 1)
+    mask = torch.zeros(1, 96, 2)
+    seen = (t >= 40) & (t != 60)
+    rays[0, seen, 0, 0] = torch.tensor([0.1, 0.2, 0.3, 0.0, 0.01, 0.0])
+    gate[0, seen, 0, 0] = 0.9
+    mask[0, seen, 0] = 1.0
+    rays[0, :, 1] = torch.randn(96, 2, 6)
+    gate[0, :, 1] = 1.0
+    smoothed, faded, present = faded_exo_tracks(kernel, rays, gate, mask)
+    g = faded[0, :, 0, 0, 0]
+    # The gate ramps up over the 6 frames either side of the first detection instead of stepping ...
+    assert (g[:34] == 0).all() and (g[34:47].diff() > 0).all() and torch.allclose(g[46:54], torch.tensor(0.9))
+    assert 0.3 < g[40] < 0.6
+    # ... dips at the missed frame without vanishing, and the observer stays present there.
+    assert 0.7 < g[60] < 0.9 and present[0, 60, 0] == 1
+    assert (present[0, :34, 0] == 0).all() and (present[0, 40:, 0] == 1).all()
+    # The constant ray is kept wherever it has weight, including the missed frame.
+    assert torch.allclose(smoothed[0, 34:, 0, 0], rays[0, 50, 0, 0].expand(62, 6), atol=1e-6)
+    # A masked observer stays absent however confident its gates, and a keypoint never
+    # detected stays empty.
+    assert (present[0, :, 1] == 0).all() and (faded[0, :, 1] == 0).all()
+    assert (faded[0, :, 0, 1] == 0).all()
+
+
+def test_fade_needs_the_exo_low_pass():
+    with pytest.raises(ValueError):
+        Fusion(96, 32, 4, 1, 1, exo_fade=True)

@@ -14,8 +14,9 @@
 //!   ([`egoexo_core::rays::ViewingRay::offset_from`]).
 //! - `exo` `[1, T, N, K, 7]` — the fusion network's exo input, exo token layout
 //!   [`EXO_TOKEN_LAYOUT_VERSION`]: the ray endpoint, the ray offset, then the gate
-//!   ([`fusion_exo_input`]); the fusion graph does the gate-weighted temporal low-pass and the
-//!   scaling by the gate.
+//!   ([`fusion_exo_input`]); the fusion graph does the gate-weighted temporal low-pass, the
+//!   scaling by the (low-passed) gate and, for models trained with `--exo-fade`, derives each
+//!   observer's presence from it.
 //! - `observer_mask` `[1, T, N]` — 1 where the slot holds an observer whose head is tracked and
 //!   at least one ray is valid at that frame.
 //!

@@ -32,25 +32,6 @@ EXO_TOKEN_LAYOUT_VERSION = 4
 MASKED = -1.0e4
 
 
-def gaussian_smoothing_matrix(frames: int, sigma: float) -> torch.Tensor:
-    """``S [frames, frames]`` with ``S @ x`` a Gaussian low-pass over time (standard deviation
-    `sigma` frames), each row renormalised over the frames inside the window so a constant
-    sequence is unchanged up to its edges. ``sigma = 0`` gives the identity."""
-    if sigma < 0:
-        raise ValueError(f"sigma must be >= 0 frames, got {sigma}")
-    if sigma == 0:
-        return torch.eye(frames)
-    t = torch.arange(frames, dtype=torch.float32)
-    weights = torch.exp(-0.5 * ((t.unsqueeze(1) - t.unsqueeze(0)) / sigma) ** 2)
-    weights = weights * (weights >= math.exp(-0.5 * 9.0))  # truncated at 3 sigma
-    return weights / weights.sum(dim=1, keepdim=True)
-
-
-# With `exo_fade`, an observer counts as present at a frame where its low-passed gates sum
-# to more than this (a tenth of one keypoint's full weight).
-FADE_PRESENT = 0.1
-
-
 def gaussian_kernel_matrix(frames: int, sigma: float) -> torch.Tensor:
     """``W [frames, frames]``, ``W[t, s] = exp(-(t - s)^2 / (2 sigma^2))`` truncated at 3 sigma
     (unnormalised; `sigma` in frames, > 0)."""
@@ -61,6 +42,23 @@ def gaussian_kernel_matrix(frames: int, sigma: float) -> torch.Tensor:
     return weights * (weights >= math.exp(-0.5 * 9.0) * (1 - 1e-6))
 
 
+def gaussian_smoothing_matrix(frames: int, sigma: float) -> torch.Tensor:
+    """``S [frames, frames]`` with ``S @ x`` a Gaussian low-pass over time (standard deviation
+    `sigma` frames), each row renormalised over the frames inside the window so a constant
+    sequence is unchanged up to its edges. ``sigma = 0`` gives the identity."""
+    if sigma < 0:
+        raise ValueError(f"sigma must be >= 0 frames, got {sigma}")
+    if sigma == 0:
+        return torch.eye(frames)
+    weights = gaussian_kernel_matrix(frames, sigma)
+    return weights / weights.sum(dim=1, keepdim=True)
+
+
+# With `exo_fade`, an observer counts as present at a frame where its low-passed gates sum
+# to more than this (a tenth of one keypoint's full weight).
+FADE_PRESENT = 0.1
+
+
 def gate_weighted_track_smoothing(kernel: torch.Tensor, values: torch.Tensor, gate: torch.Tensor) -> torch.Tensor:
     """Each track's gate-weighted Gaussian mean over time: ``values [B,T,N,K,C]`` and
     ``gate [B,T,N,K,1]`` (0 where there is no detection) -> ``[B,T,N,K,C]`` with, at frame t,
@@ -68,7 +66,7 @@ def gate_weighted_track_smoothing(kernel: torch.Tensor, values: torch.Tensor, ga
     A detection the gate rejects (g = 0) leaves its neighbours' means as well as its own frame;
     with the gate at the validity mask it is the plain low-pass over the detected frames.
     Frames without a detection get their neighbours' mean (0 if none), which the fusion graph
-    multiplies by their gate, 0: gaps stay empty."""
+    multiplies by their gate, 0: gaps stay empty (with `exo_fade`, by the faded gate instead)."""
     b, t, n, k, c = values.shape
     weighted = torch.cat([values * gate, gate], dim=-1).reshape(b, t, n * k * (c + 1))
     summed = (kernel @ weighted).reshape(b, t, n, k, c + 1)

@@ -198,7 +198,8 @@ def main():
     parser.add_argument("--exo-smoothing", type=float, default=0.0, metavar="SIGMA",
                         help="fusion: a gate-weighted Gaussian low-pass over time on each keypoint's rays, SIGMA frames (0 = off)")
     parser.add_argument("--exo-fade", action="store_true",
-                        help="fusion: scale the low-passed rays by the low-passed gate, so rays fade in and out")
+                        help="fusion (with --exo-smoothing): low-pass the gate too and derive each observer's presence "
+                             "from it, so rays and observers fade in and out")
     parser.add_argument("--steps", type=int, default=3000)
     parser.add_argument("--batch", type=int, default=32)
     parser.add_argument("--lr", type=float, default=1e-3)

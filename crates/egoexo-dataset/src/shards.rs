@@ -20,6 +20,7 @@ use egoexo_core::TrackingMode;
 use egoexo_core::ego_features::EGO_FEATURE_DIM;
 use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
 use egoexo_core::gate_features::{GATE_FEATURE_DIM, GATE_FEATURE_LAYOUT_VERSION};
+use egoexo_core::glam::Vec3;
 use egoexo_core::skeleton::NUM_JOINTS;
 use egoexo_infer::inputs::{POSE_DIM, ego_window, exo_window, window_targets, world_poses};
 use egoexo_infer::models::OnnxModel;
@@ -312,13 +313,13 @@ fn add_windows(
             // lengths are the rays' distances from the true keypoints.
             let truth_world = world_poses(&window, &target, &aligned.skeleton, aligned.head_joint_in_device);
             let truth = exo_window(aligned, &window, &truth_world, &observers, slots);
-            buffer.ray_error.extend(truth.ray_offsets.chunks_exact(3).zip(&truth.ray_valid).map(|(offset, valid)| {
-                if *valid > 0.0 {
-                    (offset[0] * offset[0] + offset[1] * offset[1] + offset[2] * offset[2]).sqrt()
-                } else {
-                    0.0
-                }
-            }));
+            buffer.ray_error.extend(
+                truth
+                    .ray_offsets
+                    .chunks_exact(3)
+                    .zip(&truth.ray_valid)
+                    .map(|(offset, valid)| if *valid > 0.0 { Vec3::from_slice(offset).length() } else { 0.0 }),
+            );
         }
         buffer.windows += 1;
     }

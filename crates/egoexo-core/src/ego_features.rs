@@ -59,6 +59,13 @@ pub enum TrackingMode {
 }
 
 impl TrackingMode {
+    /// The mode a wearer's devices allow: 3-point when both wrists are tracked, else 1-point.
+    /// The one place this rule is written; sessions, the engine, the CLI and the worker ask
+    /// here.
+    pub fn for_devices(left_wrist: bool, right_wrist: bool) -> TrackingMode {
+        if left_wrist && right_wrist { TrackingMode::ThreePoint } else { TrackingMode::OnePoint }
+    }
+
     /// The paper's name for the mode: 1 or 3 points.
     pub fn points(self) -> u8 {
         match self {

@@ -24,8 +24,10 @@
 //! Floating point: the public API is `f32` (what the networks consume); numerically delicate
 //! iterations (fisheye unprojection, metric accumulation) run in `f64` internally.
 
+pub mod aligned;
 pub mod camera;
 pub mod ego_features;
+pub mod euler;
 pub mod exo_keypoints;
 pub mod gate_features;
 pub mod metrics;
@@ -36,8 +38,10 @@ pub mod rigid;
 pub mod rotation;
 pub mod skeleton;
 
+pub use aligned::{AlignedSession, Timeline};
 pub use camera::{CameraCalibration, CameraError, Fisheye624, Pinhole, Projection};
 pub use ego_features::{EgoFeatureLayout, EgoTrajectories, TrackingMode};
+pub use euler::{Axis, EulerOrder};
 pub use exo_keypoints::{EXO_KEYPOINT_COUNT, ExoKeypoint, Keypoint2d};
 pub use metrics::{MetricsAccumulator, MotionMetrics};
 pub use motion::SmplMotion;

@@ -1,0 +1,116 @@
+//! A session resampled onto one fixed-rate timeline: the reconstruction engine's input.
+//!
+//! [`AlignedSession`] is plain data. `egoexo_session::align` builds it from a recorded
+//! session (every stream resampled onto one timeline); the engine, the training shards and the
+//! viewer's scene read it; a live capture can fill it frame by frame. Frame `i` of a
+//! [`Timeline`] is at `start_ns + round(i · 1e9 / fps)`.
+//!
+//! Conventions as in the crate docs: poses are `T_world_device` in the Y-up world (metres),
+//! head devices in the CPF frame, cameras in the OpenCV/Aria optical frame.
+
+use serde::{Deserialize, Serialize};
+
+use crate::camera::CameraCalibration;
+use crate::ego_features::TrackingMode;
+use crate::exo_keypoints::{EXO_KEYPOINT_COUNT, Keypoint2d};
+use crate::glam::Vec3;
+use crate::rigid::RigidTransform;
+use crate::skeleton::{SmplPose, SmplSkeleton};
+
+/// A fixed-rate timeline on the session clock.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Timeline {
+    /// Timestamp of frame 0, nanoseconds.
+    pub start_ns: i64,
+    /// Frames per second.
+    pub fps: f32,
+    /// Number of frames.
+    pub frames: usize,
+}
+
+impl Timeline {
+    /// Timestamp of frame `i`, nanoseconds (saturating at the ends of `i64`).
+    pub fn timestamp_ns(&self, i: usize) -> i64 {
+        let offset = (i as f64 * 1e9 / f64::from(self.fps)).round() as i64;
+        self.start_ns.saturating_add(offset)
+    }
+}
+
+/// A trajectory on the timeline. Frames not covered by the source (outside its time range,
+/// or inside a gap longer than the bridging limit) are invalid and hold the identity pose —
+/// consumers must check `valid`; nothing is invented.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct AlignedTrajectory {
+    pub poses: Vec<RigidTransform>,
+    pub valid: Vec<bool>,
+}
+
+/// One observer on the timeline.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AlignedObserver {
+    pub id: String,
+    pub camera: CameraCalibration,
+    pub head: AlignedTrajectory,
+    /// The K = 13 exo keypoints per frame (mapped from COCO-17); `None` = no detection within
+    /// tolerance of the frame time, or that keypoint not detected.
+    pub keypoints: Vec<[Option<Keypoint2d>; EXO_KEYPOINT_COUNT]>,
+    /// Context feature vector per frame, when the session has them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub context_features: Option<Vec<Option<Vec<f32>>>>,
+}
+
+/// Ground truth on the timeline.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AlignedGroundTruth {
+    pub poses: Vec<SmplPose>,
+    pub valid: Vec<bool>,
+    /// Per observer (same order as `AlignedSession::observers`), per frame: occlusion bitmask
+    /// of the 13 exo keypoints (0 when unlabelled).
+    pub occluded: Vec<Vec<u16>>,
+}
+
+/// How much of the timeline a stream covers.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StreamCoverage {
+    /// `"wearer/head"`, `"observer-1/keypoints"`, …
+    pub stream: String,
+    pub valid_frames: usize,
+    pub frames: usize,
+}
+
+/// A session resampled onto one timeline.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AlignedSession {
+    pub name: String,
+    pub timeline: Timeline,
+    pub head: AlignedTrajectory,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub left_wrist: Option<AlignedTrajectory>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub right_wrist: Option<AlignedTrajectory>,
+    pub observers: Vec<AlignedObserver>,
+    /// The wearer's skeleton (from the subject info).
+    pub skeleton: SmplSkeleton,
+    /// SMPL head joint in the head-device frame, metres.
+    pub head_joint_in_device: Vec3,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ground_truth: Option<AlignedGroundTruth>,
+    pub coverage: Vec<StreamCoverage>,
+}
+
+impl AlignedSession {
+    /// The tracking mode the wearer's devices allow ([`TrackingMode::for_devices`]): 3-point
+    /// when both wrist trajectories exist.
+    pub fn tracking_mode(&self) -> TrackingMode {
+        TrackingMode::for_devices(self.left_wrist.is_some(), self.right_wrist.is_some())
+    }
+
+    /// Whether the wearer is reconstructable at `frame` in `tracking` mode: the head is
+    /// tracked, and in 3-point mode both wrists are too.
+    pub fn wearer_tracked(&self, frame: usize, tracking: TrackingMode) -> bool {
+        let tracked = |t: &AlignedTrajectory| t.valid.get(frame).copied().unwrap_or(false);
+        let wrist = |w: &Option<AlignedTrajectory>| w.as_ref().is_some_and(tracked);
+        tracked(&self.head)
+            && (tracking == TrackingMode::OnePoint || (wrist(&self.left_wrist) && wrist(&self.right_wrist)))
+    }
+}

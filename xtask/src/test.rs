@@ -19,7 +19,7 @@ const WASM_APP_PROFILE_TEST_CRATES: &[&str] = &["egoexo-viewer"];
 
 /// Single test targets (crate, test) that run compiled to wasm32 in headless Chromium, for
 /// crates whose other tests need native I/O.
-const WASM_TEST_TARGETS: &[(&str, &str)] = &[("egoexo-session", "export_wasm"), ("egoexo-session", "import_wasm")];
+const WASM_TEST_TARGETS: &[(&str, &str)] = &[("egoexo-motion-io", "export_wasm"), ("egoexo-session", "import_wasm")];
 
 /// Test targets (crate, test) that run in headless Chromium built with the web app's profile
 /// ([`web::WASM_PROFILE`]), so they reuse the app's compiled dependencies (tract). They build in

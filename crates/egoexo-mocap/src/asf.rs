@@ -12,6 +12,8 @@
 //!
 //! Parsing works on a string (no I/O) and never panics; errors name the file and line.
 
+use egoexo_core::euler::{Axis, EulerOrder};
+
 use crate::error::{ParseError, ParseErrorKind, parse_number};
 
 /// Unit of the angles in an ASF/AMC pair.
@@ -56,52 +58,11 @@ impl AsfUnits {
     }
 }
 
-/// A coordinate axis.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Axis {
-    X,
-    Y,
-    Z,
-}
-
-impl Axis {
-    /// Index 0, 1, 2 for X, Y, Z.
-    pub fn index(self) -> usize {
-        match self {
-            Axis::X => 0,
-            Axis::Y => 1,
-            Axis::Z => 2,
-        }
-    }
-}
-
-/// An Euler order such as `XYZ`: the rotation about the first axis is applied first, so
-/// `XYZ` is the matrix `R_Z · R_Y · R_X` acting on column vectors (the CMU viewer's and
-/// Acclaim's convention).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct EulerOrder(pub [Axis; 3]);
-
-impl EulerOrder {
-    /// `XYZ`, the order every CMU file uses.
-    pub const XYZ: EulerOrder = EulerOrder([Axis::X, Axis::Y, Axis::Z]);
-
-    fn parse(token: &str) -> Option<Self> {
-        let mut axes = [Axis::X; 3];
-        let bytes = token.as_bytes();
-        if bytes.len() != 3 {
-            return None;
-        }
-        for (slot, b) in axes.iter_mut().zip(bytes) {
-            *slot = match b.to_ascii_uppercase() {
-                b'X' => Axis::X,
-                b'Y' => Axis::Y,
-                b'Z' => Axis::Z,
-                _ => return None,
-            };
-        }
-        let distinct = axes[0] != axes[1] && axes[1] != axes[2] && axes[0] != axes[2];
-        distinct.then_some(EulerOrder(axes))
-    }
+/// The Euler order of an ASF `axis` token: ASF names the axes in the order they are applied,
+/// first applied first (`XYZ`: X, then Y, then Z, i.e. `R = Rz · Ry · Rx`), which is
+/// [`EulerOrder::ZYX`] in the project's convention (`egoexo_core::euler`).
+fn parse_axis_order(token: &str) -> Option<EulerOrder> {
+    EulerOrder::parse(token).and_then(|as_written| EulerOrder::from_applied_first(as_written.axes()))
 }
 
 /// One degree of freedom of a bone or the root (a channel of the AMC line).
@@ -154,7 +115,7 @@ impl Default for AsfRoot {
                 Dof::Rotation(Axis::Y),
                 Dof::Rotation(Axis::Z),
             ],
-            axis: EulerOrder::XYZ,
+            axis: EulerOrder::ZYX,
             position: [0.0; 3],
             orientation: [0.0; 3],
         }
@@ -448,7 +409,7 @@ fn parse_root_line(
         "axis" => {
             let mut tokens = tokens;
             let token = tokens.next().unwrap_or("");
-            root.axis = EulerOrder::parse(token).ok_or_else(|| {
+            root.axis = parse_axis_order(token).ok_or_else(|| {
                 ParseError::at(
                     file,
                     line,
@@ -578,7 +539,7 @@ fn parse_bone_line(
                 *slot = parse_number(file, line_no, token)?;
             }
             let order_token = rest.next().unwrap_or("");
-            let order = EulerOrder::parse(order_token).ok_or_else(|| {
+            let order = parse_axis_order(order_token).ok_or_else(|| {
                 ParseError::at(
                     file,
                     line_no,

@@ -1,7 +1,7 @@
 //! CMU motion in BVH form, the other common way the CMU database circulates (the community
 //! conversions, e.g. `cmuconvert`, name joints `Hips`, `LeftUpLeg`, `Spine1`, …).
 //!
-//! The file is read by the project's one BVH reader ([`egoexo_session::bvh`]). Each BVH joint
+//! The file is read by the project's one BVH reader ([`egoexo_motion_io::bvh`]). Each BVH joint
 //! of such a conversion sits where the ASF bone of the same role starts, so the joints are
 //! matched to ASF bone names ([`CMU_BVH_JOINTS`]; a file may also use the ASF names
 //! themselves) and the rest of the import is the ASF/AMC one: the same joint map, retarget,
@@ -15,7 +15,7 @@
 //! file's `Frame Time` (conversions wrote 120 fps even for the 60 Hz subjects).
 
 use egoexo_core::glam::{DQuat, DVec3, Quat};
-use egoexo_session::bvh::{Bvh, BvhPose};
+use egoexo_motion_io::bvh::{Bvh, BvhPose};
 
 use crate::catalog::CatalogEntry;
 use crate::import::{ImportError, ImportOptions, TrialImport, TrialSource, clips_from_source};

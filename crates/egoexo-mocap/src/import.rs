@@ -63,7 +63,7 @@ pub enum ImportError {
     #[error("{file}: {source}")]
     Library { file: String, source: LibraryError },
     #[error("{file}: {source}")]
-    Bvh { file: String, source: egoexo_session::bvh::BvhError },
+    Bvh { file: String, source: egoexo_motion_io::bvh::BvhError },
     #[error("{file}: cannot use the BVH's length unit: {detail}; give the metres per unit")]
     BvhUnit { file: String, detail: String },
     #[error("{path}: {source}")]

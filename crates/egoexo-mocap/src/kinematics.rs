@@ -12,11 +12,12 @@
 //! first (`XYZ` → `R_Z · R_Y · R_X`); a bone's DOF rotations compose the same way in their
 //! `dof` order.
 
+use egoexo_core::euler::{Axis, EulerOrder};
 use egoexo_core::glam::{Quat, Vec3};
 use thiserror::Error;
 
 use crate::amc::ChannelLayout;
-use crate::asf::{AngleUnit, AsfSkeleton, Axis, Dof, EulerOrder};
+use crate::asf::{AngleUnit, AsfSkeleton, Dof};
 
 /// Errors turning an ASF into a kinematic skeleton.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -76,17 +77,10 @@ pub struct CmuBoneTransforms {
     pub ends: Vec<Vec3>,
 }
 
-fn axis_rotation(axis: Axis, angle: f32) -> Quat {
-    match axis {
-        Axis::X => Quat::from_rotation_x(angle),
-        Axis::Y => Quat::from_rotation_y(angle),
-        Axis::Z => Quat::from_rotation_z(angle),
-    }
-}
-
-/// Rotation of Euler angles `angles` (radians, indexed by axis X, Y, Z) applied in `order`.
+/// Rotation of Euler angles `angles` (radians, indexed by axis: X, Y, Z, as ASF lists them)
+/// in `order` (`egoexo_core::euler`'s convention; an ASF `axis XYZ` is [`EulerOrder::ZYX`]).
 pub fn euler_rotation(angles: [f32; 3], order: EulerOrder) -> Quat {
-    order.0.iter().fold(Quat::IDENTITY, |q, &axis| axis_rotation(axis, angles[axis.index()]) * q)
+    order.to_quat(order.axes().map(|axis| angles[axis.index()]))
 }
 
 fn dof_name(dof: Dof) -> &'static str {
@@ -197,7 +191,7 @@ impl CmuSkeleton {
             for (k, dof) in bone.dofs.iter().enumerate() {
                 let v = values[bone.channel_offset + k];
                 match *dof {
-                    Dof::Rotation(axis) => motion = axis_rotation(axis, v * to_rad) * motion,
+                    Dof::Rotation(axis) => motion = axis.rotation(v * to_rad) * motion,
                     Dof::Translation(axis) => root_translation[axis.index()] = v * self.metres_per_unit,
                     Dof::Length => {}
                 }
@@ -270,9 +264,9 @@ mod tests {
     use super::*;
 
     #[test]
-    fn xyz_order_applies_x_first() {
+    fn asf_xyz_applies_x_first() {
         let a = [0.3f32, -0.7, 1.1];
-        let q = euler_rotation(a, EulerOrder::XYZ);
+        let q = euler_rotation(a, EulerOrder::ZYX);
         let expected = Quat::from_rotation_z(a[2]) * Quat::from_rotation_y(a[1]) * Quat::from_rotation_x(a[0]);
         assert!(q.abs_diff_eq(expected, 1e-6));
     }
@@ -280,7 +274,7 @@ mod tests {
     #[test]
     fn femur_axis_rotates_minus_y_to_the_bone_direction() {
         // CMU lfemur: `axis 0 0 20 XYZ`, direction (sin 20°, −cos 20°, 0): the local −Y axis.
-        let c = euler_rotation([0.0, 0.0, 20f32.to_radians()], EulerOrder::XYZ);
+        let c = euler_rotation([0.0, 0.0, 20f32.to_radians()], EulerOrder::ZYX);
         let d = c * Vec3::NEG_Y;
         assert!(d.abs_diff_eq(Vec3::new(0.34202, -0.939693, 0.0), 1e-5));
     }

@@ -4,12 +4,13 @@
 
 mod common;
 
+use egoexo_core::euler::EulerOrder;
 use egoexo_core::glam::DVec3;
 use egoexo_mocap::bvh::{CMU_BVH_JOINTS, import_bvh_trial};
 use egoexo_mocap::fs::{import_tree, scan_cmu_tree};
 use egoexo_mocap::retarget::RetargetError;
 use egoexo_mocap::{CatalogEntry, ImportError, ImportOptions, SubjectImporter, TrialImport};
-use egoexo_session::bvh::{Bvh, BvhJoint, Channel, EulerOrder};
+use egoexo_motion_io::bvh::{Bvh, BvhJoint, Channel};
 
 /// The trial as BVH text; lengths in file units of `metres_per_unit`.
 fn to_cmu_bvh(importer: &SubjectImporter, amc: &str, file: &str, metres_per_unit: f64, order: EulerOrder) -> String {
@@ -39,7 +40,7 @@ fn to_cmu_bvh(importer: &SubjectImporter, amc: &str, file: &str, metres_per_unit
                         .map(Option::unwrap),
                 );
             }
-            channels.extend(order.channels());
+            channels.extend(Channel::rotations(order));
             let is_leaf = !(0..bones.len()).any(|c| bones[c].parent == Some(b));
             BvhJoint {
                 name: name(b),
@@ -57,7 +58,7 @@ fn to_cmu_bvh(importer: &SubjectImporter, amc: &str, file: &str, metres_per_unit
             if b == 0 {
                 values.extend(units(pose.root_translation).to_array());
             }
-            values.extend(order.from_quat(pose.local_rotations[b].as_dquat()));
+            values.extend(order.angles_f64(pose.local_rotations[b].as_dquat()).map(f64::to_degrees));
         }
     }
     Bvh::new(joints, 1.0 / 120.0, values).unwrap().to_bvh_string(6)

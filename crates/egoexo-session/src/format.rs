@@ -41,7 +41,9 @@ use crate::keypoints::{read_keypoints_jsonl, write_keypoints_jsonl};
 use crate::model::{
     ContextFeatureTrack, GroundTruth, Observer, ObserverOcclusion, Session, SubjectInfo, Trajectory, VideoRef, Wearer,
 };
-use crate::npz::{NpyArray, NpyData, Npz, NpzWriter};
+use egoexo_motion_io::npz::NpzWriter;
+
+use crate::npz::{NpyArray, NpyData, Npz};
 use crate::vfs::{FileTree, normalize_path};
 
 /// The manifest's file name.
@@ -142,7 +144,7 @@ pub fn write_egoexo_files(session: &Session) -> Result<BTreeMap<String, Vec<u8>>
 /// The session as `.egoexo` zip bytes.
 pub fn write_egoexo_zip(session: &Session) -> Result<Vec<u8>, WriteError> {
     let files = write_egoexo_files(session)?;
-    crate::vfs::zip_files(&files)
+    egoexo_motion_io::npz::write_zip(&files)
         .map_err(|e| WriteError::Encode { what: "the .egoexo zip".into(), message: e.to_string() })
 }
 

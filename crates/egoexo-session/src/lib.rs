@@ -1,4 +1,6 @@
-//! Sessions in, motion out.
+//! Sessions in: recognise a recording, import it into the one session model, check it, and
+//! align its streams on one timeline. (Motion files out — BVH, AMASS npz, glb, CSV — are
+//! `egoexo-motion-io`'s.)
 //!
 //! - [`model`] — the in-memory session (wearer, observers, keypoints, subject, ground truth).
 //! - [`import`] — recognises an input and imports it: [`format`](mod@format) (`.egoexo`), Nymeria, Aria
@@ -7,22 +9,19 @@
 //! - [`aria`] — Aria conventions and MPS files (`closed_loop_trajectory.csv`,
 //!   `online_calibration.jsonl`, `time_sync.csv`).
 //! - [`keypoints`] — exo keypoint files: JSON lines (read/write) and COCO JSON (read).
-//! - [`npz`] — checked `.npz` reading and writing.
+//! - [`npz`] — checked `.npz` reading (writing is `egoexo_motion_io::npz`).
 //! - [`vfs`] — [`vfs::FileTree`]: in-memory files, zip archives, and (native) folders.
 //! - [`validate`] — the session invariants; [`error`] — errors naming file, line/field and
 //!   what was expected.
-//! - [`align`](mod@align) — every stream resampled onto one timeline.
-//! - [`bvh`] — a general BVH (Biovision hierarchy) reader and writer.
-//! - [`export`] — motion exporters: AMASS-style npz, BVH, glTF binary, joint-position CSV.
+//! - [`align`](mod@align) — every stream resampled onto one timeline: an
+//!   `egoexo_core::aligned::AlignedSession`, the engine's input.
 //!
 //! Everything works on in-memory bytes so the browser's worker can use it; path helpers are
 //! native-only.
 
 pub mod align;
 pub mod aria;
-pub mod bvh;
 pub mod error;
-pub mod export;
 pub mod format;
 pub mod import;
 mod json;
@@ -32,7 +31,7 @@ pub mod npz;
 pub mod validate;
 pub mod vfs;
 
-pub use align::{AlignError, AlignOptions, AlignedSession, align};
+pub use align::{AlignError, AlignOptions, align};
 pub use error::{ImportError, ImportErrorKind, ImportWarning, Location};
 pub use import::{ImportOptions, Imported, SourceKind, import_session};
 pub use model::Session;

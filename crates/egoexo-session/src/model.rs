@@ -8,6 +8,7 @@
 //! camera, microseconds) into these before anything else sees the data.
 
 use egoexo_core::camera::CameraCalibration;
+use egoexo_core::ego_features::TrackingMode;
 use egoexo_core::exo_keypoints::{COCO17_COUNT, Keypoint2d};
 use egoexo_core::glam::Vec3;
 use egoexo_core::motion::SmplMotion;
@@ -72,9 +73,9 @@ fn default_head_joint_in_device() -> Vec3 {
 }
 
 impl Wearer {
-    /// Both wrist trajectories are present.
-    pub fn has_wrists(&self) -> bool {
-        self.left_wrist.is_some() && self.right_wrist.is_some()
+    /// The tracking mode the wearer's devices allow ([`TrackingMode::for_devices`]).
+    pub fn tracking_mode(&self) -> TrackingMode {
+        TrackingMode::for_devices(self.left_wrist.is_some(), self.right_wrist.is_some())
     }
 }
 

@@ -1,17 +1,12 @@
-//! NumPy `.npz` archives (a zip of `.npy` arrays): a checked reader for untrusted files and a
-//! writer.
+//! NumPy `.npz` archives (a zip of `.npy` arrays) in sessions: a checked reader for untrusted
+//! files. (The one writer is `egoexo_motion_io::npz::NpzWriter`.)
 //!
 //! The `.npy` reader is this crate's own (~150 lines): it parses the header dictionary
 //! strictly (`descr`, `fortran_order`, `shape`), checks the shape's element count with
 //! overflow-checked arithmetic against the bytes actually present *before* allocating, and
 //! supports little/big-endian bool, integer and float dtypes. (npyz, used for writing,
 //! multiplies an untrusted shape unchecked when reading.) Object/pickled and structured
-//! dtypes are rejected.
-
-use std::collections::BTreeMap;
-use std::io::Cursor;
-
-use npyz::WriterBuilder;
+//! dtypes are rejected. Errors name the archive and the array.
 
 use crate::error::{ImportError, ImportErrorKind, Location};
 use crate::vfs::{FileTree, Limits};
@@ -366,45 +361,10 @@ impl HeaderParser<'_> {
     }
 }
 
-/// Builds an `.npz` archive.
-#[derive(Debug, Default)]
-pub struct NpzWriter {
-    files: BTreeMap<String, Vec<u8>>,
-}
-
-impl NpzWriter {
-    pub fn new() -> Self {
-        Self::default()
-    }
-
-    /// Adds an array (`data` in C order, `data.len()` = product of `shape`).
-    pub fn add<T>(&mut self, name: &str, shape: &[u64], data: &[T]) -> std::io::Result<()>
-    where
-        T: npyz::Serialize + npyz::AutoSerialize + Copy,
-    {
-        let expected: u64 = shape.iter().product();
-        if expected != data.len() as u64 {
-            return Err(std::io::Error::new(
-                std::io::ErrorKind::InvalidInput,
-                format!("array `{name}`: shape {shape:?} does not match {} values", data.len()),
-            ));
-        }
-        let mut buf = Cursor::new(Vec::new());
-        let mut writer = npyz::WriteOptions::new().default_dtype().shape(shape).writer(&mut buf).begin_nd()?;
-        writer.extend(data.iter().copied())?;
-        writer.finish()?;
-        self.files.insert(format!("{name}.npy"), buf.into_inner());
-        Ok(())
-    }
-
-    /// The archive's bytes.
-    pub fn finish(self) -> Result<Vec<u8>, zip::result::ZipError> {
-        crate::vfs::zip_files(&self.files)
-    }
-}
-
 #[cfg(test)]
 mod tests {
+    use egoexo_motion_io::npz::NpzWriter;
+
     use super::*;
 
     #[test]

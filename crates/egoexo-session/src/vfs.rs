@@ -336,23 +336,6 @@ fn too_many_entries(name: &str, count: u64, limits: Limits) -> ImportError {
     )
 }
 
-/// Packs files into a zip archive (deflate; fixed timestamps, sorted entries, so the same
-/// input gives the same bytes).
-pub fn zip_files(files: &BTreeMap<String, Vec<u8>>) -> Result<Vec<u8>, zip::result::ZipError> {
-    use std::io::Write;
-    let mut writer = zip::ZipWriter::new(Cursor::new(Vec::new()));
-    let options = zip::write::SimpleFileOptions::default()
-        .compression_method(zip::CompressionMethod::Deflated)
-        .last_modified_time(zip::DateTime::default())
-        .large_file(false);
-    for (path, bytes) in files {
-        let options = if bytes.len() as u64 >= u32::MAX as u64 { options.large_file(true) } else { options };
-        writer.start_file(path.as_str(), options)?;
-        writer.write_all(bytes)?;
-    }
-    Ok(writer.finish()?.into_inner())
-}
-
 #[cfg(not(target_arch = "wasm32"))]
 mod native {
     use std::path::Path;
@@ -476,8 +459,7 @@ mod tests {
         let mut files = BTreeMap::new();
         files.insert("dir/a.txt".to_string(), b"hello".repeat(100));
         files.insert("b.bin".to_string(), vec![1, 2, 3]);
-        let bytes = zip_files(&files).unwrap();
-        assert_eq!(bytes, zip_files(&files).unwrap(), "deterministic");
+        let bytes = egoexo_motion_io::npz::write_zip(&files).unwrap();
         let t = FileTree::from_zip("x.zip", bytes.clone(), Limits::default()).unwrap();
         assert_eq!(t.paths(), vec!["b.bin", "dir/a.txt"]);
         assert_eq!(&*t.read("dir/a.txt").unwrap(), &files["dir/a.txt"][..]);

@@ -261,7 +261,7 @@ fn one_device_folder_and_zipped_folders_are_recognised() {
     // session is named after that folder.
     let nested: BTreeMap<String, Vec<u8>> =
         nymeria_fixture().into_iter().map(|(p, b)| (format!("my_sequence/{p}"), b)).collect();
-    let zip = egoexo_session::vfs::zip_files(&nested).unwrap();
+    let zip = egoexo_motion_io::npz::write_zip(&nested).unwrap();
     let imported =
         import_session(&FileTree::from_zip("upload.zip", zip, Limits::default()).unwrap(), &ImportOptions::default())
             .unwrap();

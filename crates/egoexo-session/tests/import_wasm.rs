@@ -16,7 +16,7 @@ wasm_bindgen_test_configure!(run_in_browser);
 
 #[wasm_bindgen_test]
 fn a_dropped_zip_imports_aligns_and_converts() {
-    let zip = egoexo_session::vfs::zip_files(&aria_fixture()).unwrap();
+    let zip = egoexo_motion_io::npz::write_zip(&aria_fixture()).unwrap();
     let tree = FileTree::from_zip("session.zip", zip, Limits::default()).unwrap();
     let imported = import_session(&tree, &ImportOptions::default()).unwrap();
     assert_eq!(imported.source, SourceKind::AriaMultiDevice);
@@ -36,7 +36,7 @@ fn a_dropped_folder_imports_with_ground_truth() {
     let imported = import_session(&tree("nymeria", nymeria_fixture()), &ImportOptions::default()).unwrap();
     assert_eq!(imported.source, SourceKind::Nymeria);
     assert_eq!(imported.session.ground_truth.as_ref().unwrap().motion.len(), 61);
-    assert!(imported.session.wearer.has_wrists());
+    assert_eq!(imported.session.wearer.tracking_mode(), egoexo_core::TrackingMode::ThreePoint);
 }
 
 #[wasm_bindgen_test]
@@ -45,6 +45,6 @@ fn bad_input_is_an_error_in_the_browser() {
     files.insert("wearer/closed_loop_trajectory.csv".into(), b"graph_uid,tracking_timestamp_us\nx,1\n".to_vec());
     let err = import_session(&tree("bad", files), &ImportOptions::default()).unwrap_err();
     assert!(err.to_string().contains("missing column `tx_world_device`"), "{err}");
-    let truncated = egoexo_session::vfs::zip_files(&aria_fixture()).unwrap()[..500].to_vec();
+    let truncated = egoexo_motion_io::npz::write_zip(&aria_fixture()).unwrap()[..500].to_vec();
     assert!(FileTree::from_zip("x.zip", truncated, Limits::default()).is_err());
 }

@@ -5,8 +5,9 @@ mod support;
 
 use std::collections::BTreeMap;
 
+use egoexo_motion_io::npz::NpzWriter;
 use egoexo_session::import::{ImportOptions, KeypointFile, import_session};
-use egoexo_session::npz::{NpyData, Npz, NpzWriter};
+use egoexo_session::npz::{NpyData, Npz};
 use egoexo_session::{FileTree, Limits};
 use serde_json::Value;
 use support::*;
@@ -108,7 +109,7 @@ fn egoexo_files() -> Files {
 }
 
 fn zip(files: &Files) -> Vec<u8> {
-    egoexo_session::vfs::zip_files(files).unwrap()
+    egoexo_motion_io::npz::write_zip(files).unwrap()
 }
 
 /// A zip archive with raw entry names (the writer refuses nothing; `zip` accepts any name).
@@ -821,7 +822,7 @@ fn cases() -> Vec<Case> {
             input: Nymeria(|f| {
                 let mut files = BTreeMap::new();
                 files.insert("timestamps.npy".to_string(), b"\x93NUMPY\x01\x00\x10\x00{'descr': '<i8' ".to_vec());
-                f.insert(SMPL.into(), egoexo_session::vfs::zip_files(&files).unwrap());
+                f.insert(SMPL.into(), egoexo_motion_io::npz::write_zip(&files).unwrap());
             }),
             expected: &["body/xdata_smpl_neutral.npz, field `timestamps`: invalid .npy array: malformed header"],
         },

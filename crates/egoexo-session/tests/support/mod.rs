@@ -22,9 +22,9 @@ use egoexo_core::motion::SmplMotion;
 use egoexo_core::rigid::RigidTransform;
 use egoexo_core::rotation::axis_angle_from_quat;
 use egoexo_core::skeleton::{DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE, SmplJoint, SmplPose, SmplSkeleton};
+use egoexo_motion_io::npz::NpzWriter;
 use egoexo_session::aria::calibration::se3_json;
 use egoexo_session::aria::{AriaFrameSize, aria_pose_from_session, aria_smpl_pose_from_session, nominal_t_device_cpf};
-use egoexo_session::npz::NpzWriter;
 use serde_json::json;
 
 /// Scene length, seconds.

@@ -27,7 +27,7 @@ use gltf_json as json;
 use json::validation::{Checked::Valid, USize64};
 use json::{Index, Root};
 
-use super::{ExportError, Format, frame_time_s, validate};
+use crate::{ExportError, Format, frame_time_s, validate};
 
 /// The asset's `generator` string.
 pub const GENERATOR: &str = concat!("egoexo ", env!("CARGO_PKG_VERSION"));
@@ -391,7 +391,7 @@ mod tests {
     use egoexo_core::glam::Mat4;
 
     use super::*;
-    use crate::export::test_motion;
+    use crate::test_motion;
 
     /// Reads a GLB back (JSON + BIN) with the same JSON types.
     fn read_glb(bytes: &[u8]) -> (Root, Vec<u8>) {

@@ -9,54 +9,18 @@
 //! and say so; they never pass silently.
 #![cfg(not(target_arch = "wasm32"))]
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Command;
 
 use egoexo_core::SmplMotion;
 use egoexo_core::glam::{Quat, Vec3};
 use egoexo_core::rotation::quat_from_axis_angle;
 use egoexo_core::skeleton::{JOINT_NAMES, NUM_BODY_JOINTS, NUM_JOINTS, SmplPose, SmplSkeleton};
-use egoexo_session::export::bvh::{BvhOptions, LengthUnit, write_bvh};
-use egoexo_session::export::npz::{AmassArrays, motion_from_amass, write_npz};
-use egoexo_session::export::{Format, write};
+use egoexo_motion_io::amass::{AmassArrays, motion_from_amass, write_npz};
+use egoexo_motion_io::smpl_bvh::{BvhOptions, LengthUnit, write_bvh};
+use egoexo_motion_io::{Format, write};
+use egoexo_test_support::{node_modules, python, run_tool as run, workspace_root};
 use serde_json::Value;
-
-const SETUP_HINT: &str = "run `cargo xtask setup` (or `cargo xtask test`, which runs it) to install the test tools";
-
-fn workspace_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-/// The venv's Python: `EGOEXO_PYTHON`, else `target/py` if `cargo xtask setup` made it.
-fn python() -> PathBuf {
-    if let Some(p) = std::env::var_os("EGOEXO_PYTHON") {
-        return p.into();
-    }
-    let venv = workspace_root().join("target/py/bin/python");
-    assert!(venv.exists(), "the Python test environment (target/py) is missing: {SETUP_HINT}");
-    venv
-}
-
-/// `tests/node_modules`: `EGOEXO_NODE_MODULES`, else the default location.
-fn node_modules() -> PathBuf {
-    let dir = std::env::var_os("EGOEXO_NODE_MODULES")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| workspace_root().join("tests/node_modules"));
-    assert!(dir.join("gltf-validator").exists(), "{} has no gltf-validator: {SETUP_HINT}", dir.display());
-    dir
-}
-
-/// Runs a command and returns its stdout; fails the test with its stderr otherwise.
-fn run(cmd: &mut Command) -> String {
-    let out = cmd.output().unwrap_or_else(|e| panic!("cannot run {cmd:?}: {e}; {SETUP_HINT}"));
-    assert!(
-        out.status.success(),
-        "{cmd:?} failed ({}):\n{}\n(if a module or package is missing: {SETUP_HINT})",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).expect("UTF-8 output")
-}
 
 fn script(name: &str) -> PathBuf {
     workspace_root().join("tests").join(name)
@@ -222,7 +186,7 @@ fn bvh_plays_back_in_the_independent_bvhio_reader() {
 #[test]
 fn glb_passes_the_khronos_validator() {
     let dir = tempfile::tempdir().unwrap();
-    let node_modules = node_modules();
+    let node_modules = node_modules("gltf-validator");
     for (name, frames) in [("one_frame", 1), ("walk", 90)] {
         let glb = dir.path().join(format!("{name}.glb"));
         let motion = motion(frames, SmplSkeleton::mean_shape().scaled(1.04), None);

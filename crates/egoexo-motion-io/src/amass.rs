@@ -31,16 +31,14 @@
 //! Body-joint rotations are local and so are the same in either world.
 //! [`motion_from_amass`] undoes all of this.
 
-use std::io::{Cursor, Write};
-
 use egoexo_core::SmplMotion;
 use egoexo_core::glam::{Quat, Vec3};
 use egoexo_core::rotation::{axis_angle_from_quat, quat_from_axis_angle};
 use egoexo_core::skeleton::{MEAN_SHAPE_REST_JOINTS, NUM_BODY_JOINTS, NUM_JOINTS, SmplPose, SmplSkeleton};
-use npyz::WriterBuilder;
 use thiserror::Error;
 
-use super::{ExportError, Format, validate};
+use crate::npz::{NpzWriteError, NpzWriter};
+use crate::{ExportError, Format, validate};
 
 /// Rotation from this project's Y-up world to AMASS's Z-up world: +90° about X.
 pub const Y_UP_TO_Z_UP: Quat =
@@ -109,47 +107,17 @@ pub fn amass_arrays(motion: &SmplMotion) -> Result<AmassArrays, ExportError> {
 pub fn write_npz(motion: &SmplMotion) -> Result<Vec<u8>, ExportError> {
     let a = amass_arrays(motion)?;
     let n = a.num_frames() as u64;
-    let encode = |e: &dyn std::fmt::Display| ExportError::Encode { format: Format::Npz, message: e.to_string() };
-    let mut zip = zip::ZipWriter::new(Cursor::new(Vec::new()));
-    let options = zip::write::SimpleFileOptions::default()
-        .compression_method(zip::CompressionMethod::Deflated)
-        .last_modified_time(zip::DateTime::default());
-    let mut add = |name: &str, npy: Vec<u8>| -> Result<(), ExportError> {
-        zip.start_file(format!("{name}.npy"), options).map_err(|e| encode(&e))?;
-        zip.write_all(&npy).map_err(|e| encode(&e))
-    };
-    add("poses", npy_f64(&a.poses, &[n, POSE_WIDTH as u64]).map_err(|e| encode(&e))?)?;
-    add("trans", npy_f64(&a.trans, &[n, 3]).map_err(|e| encode(&e))?)?;
-    add("betas", npy_f64(&a.betas, &[a.betas.len() as u64]).map_err(|e| encode(&e))?)?;
-    add("gender", npy_str("neutral").map_err(|e| encode(&e))?)?;
-    add("mocap_framerate", npy_f64(&[a.mocap_framerate], &[]).map_err(|e| encode(&e))?)?;
+    let encode = |e: NpzWriteError| ExportError::Encode { format: Format::Npz, message: e.to_string() };
+    let mut npz = NpzWriter::new();
+    npz.add("poses", &[n, POSE_WIDTH as u64], &a.poses).map_err(encode)?;
+    npz.add("trans", &[n, 3], &a.trans).map_err(encode)?;
+    npz.add("betas", &[a.betas.len() as u64], &a.betas).map_err(encode)?;
+    npz.add_str("gender", "neutral").map_err(encode)?;
+    npz.add("mocap_framerate", &[], &[a.mocap_framerate]).map_err(encode)?;
     if let Some(rest) = &a.rest_joints {
-        add("rest_joints", npy_f64(rest, &[NUM_JOINTS as u64, 3]).map_err(|e| encode(&e))?)?;
+        npz.add("rest_joints", &[NUM_JOINTS as u64, 3], rest).map_err(encode)?;
     }
-    Ok(zip.finish().map_err(|e| encode(&e))?.into_inner())
-}
-
-/// A C-order little-endian float64 `.npy` of `shape`.
-fn npy_f64(values: &[f64], shape: &[u64]) -> std::io::Result<Vec<u8>> {
-    let mut out = Vec::with_capacity(128 + 8 * values.len());
-    let mut writer = npyz::WriteOptions::<f64>::new().default_dtype().shape(shape).writer(&mut out).begin_nd()?;
-    writer.extend(values.iter().copied())?;
-    writer.finish()?;
-    Ok(out)
-}
-
-/// A 0-d unicode-string `.npy` (`<U{len}`), as numpy saves `np.array("neutral")`.
-fn npy_str(s: &str) -> std::io::Result<Vec<u8>> {
-    let len = s.chars().count().max(1);
-    let dtype: npyz::TypeStr = format!("<U{len}")
-        .parse()
-        .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("{e}")))?;
-    let mut out = Vec::new();
-    let mut writer =
-        npyz::WriteOptions::<str>::new().dtype(npyz::DType::Plain(dtype)).shape(&[]).writer(&mut out).begin_nd()?;
-    writer.push(s)?;
-    writer.finish()?;
-    Ok(out)
+    npz.finish().map_err(encode)
 }
 
 /// Why AMASS arrays do not make a motion.
@@ -222,10 +190,10 @@ pub fn motion_from_amass(a: &AmassArrays, start_ns: i64) -> Result<SmplMotion, A
 
 #[cfg(test)]
 mod tests {
-    use std::io::Read;
+    use std::io::{Cursor, Read};
 
     use super::*;
-    use crate::export::test_motion;
+    use crate::test_motion;
 
     #[test]
     fn y_up_to_z_up_maps_up_to_up() {

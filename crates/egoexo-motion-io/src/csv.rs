@@ -9,7 +9,7 @@
 use egoexo_core::SmplMotion;
 use egoexo_core::skeleton::JOINT_NAMES;
 
-use super::{ExportError, Format, frame_time_s, validate};
+use crate::{ExportError, Format, frame_time_s, validate};
 
 /// The header row's column names.
 pub fn column_names() -> Vec<String> {
@@ -44,7 +44,7 @@ mod tests {
     use egoexo_core::skeleton::SmplSkeleton;
 
     use super::*;
-    use crate::export::test_motion;
+    use crate::test_motion;
 
     #[test]
     fn rows_are_the_forward_kinematics_positions() {

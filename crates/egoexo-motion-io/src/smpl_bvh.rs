@@ -24,12 +24,13 @@
 //!   time is not stored.
 
 use egoexo_core::SmplMotion;
+use egoexo_core::euler::{Axis, EulerOrder};
 use egoexo_core::glam::{DQuat, DVec3, Quat, Vec3};
 use egoexo_core::skeleton::{JOINT_NAMES, NUM_BODY_JOINTS, NUM_JOINTS, PARENTS, SmplPose, SmplSkeleton};
 use thiserror::Error;
 
-use super::{ExportError, validate};
-use crate::bvh::{Axis, Bvh, BvhError, BvhJoint, Channel, EulerOrder};
+use crate::bvh::{Bvh, BvhError, BvhJoint, Channel};
+use crate::{ExportError, Format, validate};
 
 /// Length unit of the written file.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -113,7 +114,7 @@ pub fn smpl_bvh(motion: &SmplMotion, unit: LengthUnit) -> Result<Bvh, ExportErro
     validate(motion)?;
     if motion.len() > crate::bvh::MAX_FRAMES {
         return Err(ExportError::TooManyFrames {
-            format: super::Format::Bvh,
+            format: Format::Bvh,
             frames: motion.len(),
             limit: crate::bvh::MAX_FRAMES,
         });
@@ -133,9 +134,9 @@ pub fn smpl_bvh(motion: &SmplMotion, unit: LengthUnit) -> Result<Bvh, ExportErro
             let channels = match j {
                 0 => [Channel::Xposition, Channel::Yposition, Channel::Zposition]
                     .into_iter()
-                    .chain(ROOT_EULER_ORDER.channels())
+                    .chain(Channel::rotations(ROOT_EULER_ORDER))
                     .collect(),
-                _ => euler_order(j).channels().to_vec(),
+                _ => Channel::rotations(euler_order(j)).to_vec(),
             };
             BvhJoint {
                 name: JOINT_NAMES[j].to_string(),
@@ -153,11 +154,11 @@ pub fn smpl_bvh(motion: &SmplMotion, unit: LengthUnit) -> Result<Bvh, ExportErro
         values.extend(to_file(pelvis).to_array());
         for &j in &order {
             let q = pose.local_rotation(j).as_dquat().normalize();
-            values.extend(euler_order(j).from_quat(q));
+            values.extend(euler_order(j).angles_f64(q).map(f64::to_degrees));
         }
     }
     Bvh::new(joints, 1.0 / f64::from(motion.fps), values)
-        .map_err(|e| ExportError::Encode { format: super::Format::Bvh, message: e.to_string() })
+        .map_err(|e| ExportError::Encode { format: Format::Bvh, message: e.to_string() })
 }
 
 /// Writes `motion` as BVH text (see the module docs for the layout and conventions).
@@ -251,13 +252,13 @@ pub fn motion_from_smpl_bvh(bvh: &Bvh, unit: LengthUnit) -> Result<SmplMotion, S
 
 /// The axis SMPL joint `j`'s rotation order puts in the middle (its bone axis).
 pub fn twist_axis(j: usize) -> Axis {
-    euler_order(j).0[1]
+    euler_order(j).axes()[1]
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::export::test_motion;
+    use crate::test_motion;
 
     fn max_joint_error(a: &SmplMotion, b: &SmplMotion) -> f32 {
         a.joint_positions()

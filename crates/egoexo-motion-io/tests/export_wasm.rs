@@ -9,9 +9,9 @@ use egoexo_core::SmplMotion;
 use egoexo_core::glam::{Quat, Vec3};
 use egoexo_core::rotation::quat_from_axis_angle;
 use egoexo_core::skeleton::{NUM_BODY_JOINTS, SmplPose, SmplSkeleton};
-use egoexo_session::bvh::Bvh;
-use egoexo_session::export::bvh::{LengthUnit, motion_from_smpl_bvh};
-use egoexo_session::export::{Format, write};
+use egoexo_motion_io::bvh::Bvh;
+use egoexo_motion_io::smpl_bvh::{LengthUnit, motion_from_smpl_bvh};
+use egoexo_motion_io::{Format, write};
 use wasm_bindgen_test::{wasm_bindgen_test, wasm_bindgen_test_configure};
 
 wasm_bindgen_test_configure!(run_in_browser);

@@ -12,7 +12,8 @@
 //! - **Rotation channels** are in degrees. A joint's local rotation is the product of its
 //!   rotation channels' elementary rotations *in the order listed*: `Zrotation Xrotation
 //!   Yrotation` means `R = Rz(z) · Rx(x) · Ry(y)` (intrinsic Z, then X, then Y), acting on column
-//!   vectors expressed in the joint's frame and giving them in the parent's frame.
+//!   vectors expressed in the joint's frame and giving them in the parent's frame. That is
+//!   [`EulerOrder::ZXY`] in the project's one Euler convention (`egoexo_core::euler`).
 //! - **Position channels** give the joint's origin in its parent's frame and *replace* the
 //!   matching `OFFSET` component (Blender's reading, and bvhio's). Writers usually give such
 //!   joints (the root) `OFFSET 0 0 0`, so that reading and "offset + channels" agree.
@@ -23,7 +24,8 @@
 
 use std::fmt::Write as _;
 
-use egoexo_core::glam::{DMat3, DQuat, DVec3};
+use egoexo_core::euler::{Axis, EulerOrder};
+use egoexo_core::glam::{DQuat, DVec3};
 use thiserror::Error;
 
 /// Most joints a hierarchy may declare.
@@ -98,93 +100,17 @@ impl Channel {
             Axis::Z => Channel::Zrotation,
         }
     }
+
+    /// The three rotation channels of `order`, as a file lists them (product order,
+    /// outermost first: `ZXY` is `Zrotation Xrotation Yrotation`).
+    pub fn rotations(order: EulerOrder) -> [Channel; 3] {
+        order.axes().map(Channel::rotation)
+    }
 }
 
 impl std::fmt::Display for Channel {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
-    }
-}
-
-/// A coordinate axis.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Axis {
-    X,
-    Y,
-    Z,
-}
-
-impl Axis {
-    /// 0, 1, 2 for X, Y, Z.
-    pub fn index(self) -> usize {
-        match self {
-            Axis::X => 0,
-            Axis::Y => 1,
-            Axis::Z => 2,
-        }
-    }
-
-    /// The rotation by `radians` about this axis.
-    pub fn rotation(self, radians: f64) -> DQuat {
-        match self {
-            Axis::X => DQuat::from_rotation_x(radians),
-            Axis::Y => DQuat::from_rotation_y(radians),
-            Axis::Z => DQuat::from_rotation_z(radians),
-        }
-    }
-}
-
-/// Three distinct axes of an intrinsic Euler (Tait–Bryan) decomposition, outermost first:
-/// `EulerOrder([Z, X, Y])` is `R = Rz · Rx · Ry`, written as `Zrotation Xrotation Yrotation`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct EulerOrder(pub [Axis; 3]);
-
-impl EulerOrder {
-    pub const XYZ: EulerOrder = EulerOrder([Axis::X, Axis::Y, Axis::Z]);
-    pub const XZY: EulerOrder = EulerOrder([Axis::X, Axis::Z, Axis::Y]);
-    pub const YXZ: EulerOrder = EulerOrder([Axis::Y, Axis::X, Axis::Z]);
-    pub const YZX: EulerOrder = EulerOrder([Axis::Y, Axis::Z, Axis::X]);
-    pub const ZXY: EulerOrder = EulerOrder([Axis::Z, Axis::X, Axis::Y]);
-    pub const ZYX: EulerOrder = EulerOrder([Axis::Z, Axis::Y, Axis::X]);
-
-    /// The three rotation channels in this order.
-    pub fn channels(self) -> [Channel; 3] {
-        self.0.map(Channel::rotation)
-    }
-
-    /// Whether the axes are three distinct ones.
-    pub fn is_valid(self) -> bool {
-        let [a, b, c] = self.0;
-        a != b && b != c && a != c
-    }
-
-    /// The rotation of three angles in degrees (outermost first).
-    pub fn to_quat(self, degrees: [f64; 3]) -> DQuat {
-        let [a, b, c] = self.0;
-        a.rotation(degrees[0].to_radians()) * b.rotation(degrees[1].to_radians()) * c.rotation(degrees[2].to_radians())
-    }
-
-    /// Angles in degrees (outermost first) with `self.to_quat(angles) == q`. The middle angle
-    /// is in `[-90°, 90°]`, the others in `(-180°, 180°]`; at the middle angle's ±90° (gimbal
-    /// lock) the innermost angle is set to 0. For an invalid order (repeated axes) the result
-    /// is zeros.
-    pub fn from_quat(self, q: DQuat) -> [f64; 3] {
-        if !self.is_valid() {
-            return [0.0; 3];
-        }
-        let [i, j, k] = self.0.map(Axis::index);
-        // +1 for a cyclic (even) permutation of XYZ, −1 otherwise.
-        let sign = if (j + 3 - i) % 3 == 1 { 1.0 } else { -1.0 };
-        let m = DMat3::from_quat(q.normalize());
-        let r = |row: usize, col: usize| m.col(col)[row];
-        let cos_middle = r(i, i).hypot(r(i, j));
-        let middle = (sign * r(i, k)).atan2(cos_middle);
-        let (outer, inner) = if cos_middle > 1e-9 {
-            ((-sign * r(j, k)).atan2(r(k, k)), (-sign * r(i, j)).atan2(r(i, i)))
-        } else {
-            ((sign * r(k, j)).atan2(r(j, j)), 0.0)
-        };
-        [outer.to_degrees(), middle.to_degrees(), inner.to_degrees()]
     }
 }
 
@@ -385,7 +311,7 @@ impl Bvh {
         let mut rotation = DQuat::IDENTITY;
         for (&channel, &value) in j.channels.iter().zip(values) {
             if channel.is_rotation() {
-                rotation *= channel.axis().rotation(value.to_radians());
+                rotation *= channel.axis().rotation_f64(value.to_radians());
             } else {
                 translation[channel.axis().index()] = value;
             }
@@ -878,30 +804,13 @@ Frame Time: 0.0333333
         let text = TWO_JOINTS.replace("1 2 3 90 0 0 0 90 0", "0 0 0 30 40 50 0 0 0");
         let bvh = Bvh::parse(&text).unwrap();
         let r = bvh.local_pose(0, 1).unwrap().rotation;
-        let expected = EulerOrder::ZXY.to_quat([30.0, 40.0, 50.0]);
+        let expected = EulerOrder::ZXY.to_quat_f64([30f64, 40.0, 50.0].map(f64::to_radians));
         assert!(r.abs_diff_eq(expected, 1e-12));
         let rz = DQuat::from_rotation_z(30f64.to_radians());
         let rx = DQuat::from_rotation_x(40f64.to_radians());
         let ry = DQuat::from_rotation_y(50f64.to_radians());
         assert!(r.abs_diff_eq(rz * rx * ry, 1e-12));
         assert!(!r.abs_diff_eq(ry * rx * rz, 1e-3));
-    }
-
-    #[test]
-    fn euler_decomposition_round_trips_in_every_order() {
-        let orders =
-            [EulerOrder::XYZ, EulerOrder::XZY, EulerOrder::YXZ, EulerOrder::YZX, EulerOrder::ZXY, EulerOrder::ZYX];
-        let angles =
-            [[10.0, 20.0, 30.0], [-170.0, 89.0, 5.0], [45.0, -60.0, 179.0], [0.0, 90.0, 30.0], [20.0, -90.0, 0.0]];
-        for order in orders {
-            for a in angles {
-                let q = order.to_quat(a);
-                let back = order.from_quat(q);
-                let q2 = order.to_quat(back);
-                assert!(q.dot(q2).abs() > 1.0 - 1e-12, "{order:?} {a:?} -> {back:?}");
-                assert!(back[1].abs() <= 90.0 + 1e-9);
-            }
-        }
     }
 
     #[test]

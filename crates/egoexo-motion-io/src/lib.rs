@@ -1,24 +1,31 @@
-//! Motion exporters: an [`SmplMotion`] in, the bytes of a file other tools read out.
+//! SMPL motion files in and out: what the CLI and the browser's worker export, and what the
+//! motion library and the tests read back.
 //!
-//! Every exporter works in memory (no paths, no clock, no threads), so the CLI and the
-//! browser's worker call the same code: [`write()`] with a [`Format`], usually from a file
+//! Every reader and writer works in memory (no paths, no clock, no threads), so the CLI and
+//! the browser's worker call the same code: [`write()`] with a [`Format`], usually from a file
 //! name's extension ([`Format::from_path`]).
 //!
 //! | format | module | world axes | units | what it holds |
 //! |---|---|---|---|---|
-//! | AMASS `.npz` | [`npz`] | **Z up** (AMASS's world) | metres, radians | SMPL `poses` (N,72), `trans`, `betas`, `gender`, `mocap_framerate` |
-//! | `.bvh` | [`bvh`] | Y up (this project's world) | metres (or centimetres by option) | SMPL hierarchy, per-joint Euler channels in degrees |
+//! | AMASS `.npz` | [`amass`] | **Z up** (AMASS's world) | metres, radians | SMPL `poses` (N,72), `trans`, `betas`, `gender`, `mocap_framerate` |
+//! | `.bvh` | [`smpl_bvh`] | Y up (this project's world) | metres (or centimetres by option) | SMPL hierarchy, per-joint Euler channels in degrees |
 //! | `.glb` | [`gltf`] | Y up, +Z forward (glTF's) | metres | skinned bone mesh, 24 joint nodes, animation |
 //! | `.csv` | [`csv`] | Y up (this project's world) | metres, seconds | 24 joint positions per frame |
+//!
+//! Below them: [`bvh`], a general BVH reader and writer (any hierarchy; the CMU importer
+//! reads BVH trials with it), and [`npz`], the one `.npz` writer (AMASS files, `.egoexo`
+//! sessions and training shards all use it). Euler angles follow `egoexo_core::euler`.
 //!
 //! The project's own world is Y up (gravity along −Y), metres; the SMPL body frame faces +Z
 //! with the subject's left on +X (see `egoexo_core::skeleton`). `docs/exports.md` describes
 //! each format for users.
 
+pub mod amass;
 pub mod bvh;
 pub mod csv;
 pub mod gltf;
 pub mod npz;
+pub mod smpl_bvh;
 
 use std::fmt;
 use std::str::FromStr;
@@ -29,9 +36,9 @@ use thiserror::Error;
 /// A file format the exporters write.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Format {
-    /// AMASS-style SMPL parameters, a NumPy `.npz` archive ([`npz`]).
+    /// AMASS-style SMPL parameters, a NumPy `.npz` archive ([`amass`]).
     Npz,
-    /// Biovision hierarchy with the SMPL skeleton ([`bvh`]).
+    /// Biovision hierarchy with the SMPL skeleton ([`smpl_bvh`]).
     Bvh,
     /// glTF 2.0 binary: skeleton, bone mesh and animation ([`gltf`]).
     Glb,
@@ -119,8 +126,8 @@ pub enum ExportError {
 /// Writes `motion` in `format`.
 pub fn write(format: Format, motion: &SmplMotion) -> Result<Vec<u8>, ExportError> {
     match format {
-        Format::Npz => npz::write_npz(motion),
-        Format::Bvh => bvh::write_bvh(motion, &bvh::BvhOptions::default()),
+        Format::Npz => amass::write_npz(motion),
+        Format::Bvh => smpl_bvh::write_bvh(motion, &smpl_bvh::BvhOptions::default()),
         Format::Glb => gltf::write_glb(motion),
         Format::Csv => csv::write_csv(motion),
     }
@@ -157,7 +164,7 @@ pub(crate) fn frame_time_s(motion: &SmplMotion, i: usize) -> f64 {
 }
 
 #[cfg(test)]
-pub(crate) mod test_motion {
+mod test_motion {
     //! A deterministic, varied test motion: every joint moves, the root walks and turns.
 
     use egoexo_core::SmplMotion;

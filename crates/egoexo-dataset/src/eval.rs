@@ -11,6 +11,7 @@
 //! larger than what the choice of clips alone would produce.
 
 use egoexo_core::TrackingMode;
+use egoexo_core::aligned::AlignedSession;
 use egoexo_core::ego_features::EGO_FEATURE_DIM;
 use egoexo_core::metrics::{MetricsAccumulator, MotionMetrics};
 use egoexo_infer::baselines::NearestNeighbourIndex;
@@ -18,7 +19,7 @@ use egoexo_infer::inputs::{POSE_DIM, ego_window, window_targets};
 use egoexo_infer::windows::{WINDOW, plan_windows, valid_spans};
 use egoexo_infer::{Engine, Method, ReconstructOptions};
 use egoexo_mocap::MotionLibrary;
-use egoexo_session::align::{AlignOptions, AlignedSession, align};
+use egoexo_session::align::{AlignOptions, align};
 use egoexo_synth::rng::SimRng;
 use egoexo_synth::{SynthConfig, simulate};
 use serde::{Deserialize, Serialize};
@@ -249,10 +250,12 @@ pub fn evaluate(
             truth.add_segment(joints, joints, fps, None)?;
             occluded_truth.add_segment(joints, joints, fps, Some(&hidden[range]))?;
         }
-        for (m, &method) in options.methods.iter().enumerate() {
-            let r = engine
-                .reconstruct(&aligned, &ReconstructOptions { method, ..protocol }, &mut |_| true)
-                .map_err(|e| DatasetError::Reconstruct { method: method.name(), message: e.to_string() })?;
+        // Methods sharing a coarse pose share one ego pass (EgoNet once per window).
+        let reconstructions =
+            engine.reconstruct_each(&aligned, &protocol, &options.methods, &mut |_| true).map_err(|e| {
+                DatasetError::Reconstruct { method: method_names(&options.methods), message: e.to_string() }
+            })?;
+        for (m, r) in reconstructions.iter().enumerate() {
             let (mut clip_all, mut clip_occluded) = (MetricsAccumulator::new(), MetricsAccumulator::new());
             for segment in &segments {
                 let range = segment.frames.clone();
@@ -289,6 +292,11 @@ pub fn evaluate(
         occluded_ground_truth: occluded_truth.finish(),
         paired: paired_comparisons(&options.methods, &per_clip, options.seed),
     })
+}
+
+/// `rest-pose, ego-exo, …`.
+fn method_names(methods: &[Method]) -> String {
+    methods.iter().map(|m| m.name()).collect::<Vec<_>>().join(", ")
 }
 
 /// The report as the paper's table (plain text).

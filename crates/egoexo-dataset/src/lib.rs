@@ -26,7 +26,7 @@ pub enum DatasetError {
     #[error("simulated session has no ground truth")]
     NoGroundTruth,
     #[error("{method}: {message}")]
-    Reconstruct { method: &'static str, message: String },
+    Reconstruct { method: String, message: String },
     #[error("metrics: {0}")]
     Metrics(#[from] egoexo_core::metrics::MetricsError),
     #[error("writing shards: {0}")]

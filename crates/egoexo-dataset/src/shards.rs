@@ -17,6 +17,7 @@
 //! the EgoNet checksum used. The writer returns bytes; the caller stores them.
 
 use egoexo_core::TrackingMode;
+use egoexo_core::aligned::AlignedSession;
 use egoexo_core::ego_features::EGO_FEATURE_DIM;
 use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
 use egoexo_core::gate_features::{GATE_FEATURE_DIM, GATE_FEATURE_LAYOUT_VERSION};
@@ -24,11 +25,12 @@ use egoexo_core::glam::Vec3;
 use egoexo_core::skeleton::NUM_JOINTS;
 use egoexo_infer::inputs::{POSE_DIM, ego_window, exo_window, window_targets, world_poses};
 use egoexo_infer::models::OnnxModel;
-use egoexo_infer::pipeline::{coarse_pose_with, observer_order};
+use egoexo_infer::passes::coarse_pose_with;
+use egoexo_infer::plan::observer_order;
 use egoexo_infer::windows::{WINDOW, plan_windows, valid_spans};
 use egoexo_mocap::MotionLibrary;
-use egoexo_session::align::{AlignOptions, AlignedSession, align};
-use egoexo_session::npz::NpzWriter;
+use egoexo_motion_io::npz::{NpzWriteError, NpzWriter};
+use egoexo_session::align::{AlignOptions, align};
 use egoexo_synth::{SynthConfig, simulate};
 use serde::{Deserialize, Serialize};
 
@@ -139,7 +141,7 @@ impl Buffer {
         let n = slots as u64;
         let k = EXO_KEYPOINT_COUNT as u64;
         let mut npz = NpzWriter::new();
-        let io = |e: std::io::Error| DatasetError::Write(e.to_string());
+        let io = |e: NpzWriteError| DatasetError::Write(e.to_string());
         npz.add("ego", &[w, t, EGO_FEATURE_DIM as u64], &self.ego).map_err(io)?;
         npz.add("target", &[w, t, POSE_DIM as u64], &self.target).map_err(io)?;
         npz.add("frame_mask", &[w, t], &self.frame_mask).map_err(io)?;
@@ -157,7 +159,7 @@ impl Buffer {
             npz.add("occluded", &[w, t, n, k], &self.occluded).map_err(io)?;
             npz.add("ray_error", &[w, t, n, k], &self.ray_error).map_err(io)?;
         }
-        let bytes = npz.finish().map_err(|e| DatasetError::Write(e.to_string()))?;
+        let bytes = npz.finish().map_err(io)?;
         *self = Buffer::default();
         Ok(bytes)
     }

@@ -1,17 +1,19 @@
 //! Reconstruction throughput, native: frames per second of the engine on simulated 20 s
 //! sessions with 1 and 3 observers (3-point tracking), with the shipped models (`models/`),
-//! against ego-only on the same session as the in-run reference. Run with
-//! `cargo bench -p egoexo-infer`; criterion reports medians, and the throughput lines give
-//! frames per second.
+//! against ego-only on the same session as the in-run reference; and the app's whole job
+//! (ego-exo plus the ego-only overlay) as one job sharing the ego pass against two separate
+//! reconstructions (EgoNet twice). Run with `cargo bench -p egoexo-infer`; criterion reports
+//! medians, and the throughput lines give frames per second.
 
 use std::path::{Path, PathBuf};
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use egoexo_core::TrackingMode;
+use egoexo_core::aligned::AlignedSession;
 use egoexo_infer::manifest::Manifest;
 use egoexo_infer::models::ModelSet;
 use egoexo_infer::{Engine, InferError, Method, ReconstructOptions};
-use egoexo_session::align::{AlignOptions, AlignedSession, align};
+use egoexo_session::align::{AlignOptions, align};
 use egoexo_synth::procedural::walking_circle;
 use egoexo_synth::{SynthConfig, simulate};
 
@@ -58,6 +60,27 @@ fn reconstruct(c: &mut Criterion) {
                 |b, aligned| b.iter(|| engine.reconstruct(aligned, &options, &mut |_| true).expect("reconstructs")),
             );
         }
+        let options = ReconstructOptions::default();
+        let app_job = [Method::EgoExo, Method::EgoOnly];
+        group.bench_with_input(
+            BenchmarkId::new("app-job-shared-ego-pass", format!("{observers}-observer")),
+            &aligned,
+            |b, aligned| {
+                b.iter(|| engine.reconstruct_each(aligned, &options, &app_job, &mut |_| true).expect("reconstructs"))
+            },
+        );
+        group.bench_with_input(
+            BenchmarkId::new("app-job-two-reconstructions", format!("{observers}-observer")),
+            &aligned,
+            |b, aligned| {
+                b.iter(|| {
+                    app_job.map(|method| {
+                        let options = ReconstructOptions { method, ..options };
+                        engine.reconstruct(aligned, &options, &mut |_| true).expect("reconstructs")
+                    })
+                })
+            },
+        );
     }
     group.finish();
 }

@@ -23,6 +23,7 @@
 //! Padded frames (after a short span's last frame) repeat the last real frame's wearer poses
 //! and carry no exo evidence; `frame_mask` marks the real ones.
 
+use egoexo_core::aligned::AlignedSession;
 use egoexo_core::camera::CameraCalibration;
 use egoexo_core::ego_features::{EGO_FEATURE_DIM, EgoTrajectories, TrackingMode, ego_features};
 use egoexo_core::exo_keypoints::{EXO_KEYPOINT_COUNT, exo_keypoints_from_smpl};
@@ -33,7 +34,6 @@ use egoexo_core::region::{DEFAULT_REGION_MARGIN, propose_region};
 use egoexo_core::rigid::RigidTransform;
 use egoexo_core::rotation::Rot6d;
 use egoexo_core::skeleton::{NUM_BODY_JOINTS, NUM_JOINTS, SmplJoint, SmplPose, SmplSkeleton};
-use egoexo_session::align::AlignedSession;
 
 use crate::InferError;
 use crate::windows::{WINDOW, WindowPlan};
@@ -161,10 +161,16 @@ pub struct ExoWindow {
 }
 
 impl ExoWindow {
-    /// Index of `(t, slot, k)` in `[T, N, K]` arrays.
+    /// Index of `(t, slot, k)` in `[T, N, K]` arrays ([`exo_index`]).
     pub fn index(&self, t: usize, slot: usize, k: usize) -> usize {
-        (t * self.slots + slot) * EXO_KEYPOINT_COUNT + k
+        exo_index(self.slots, t, slot, k)
     }
+}
+
+/// Index of window frame `t`, observer slot `slot`, keypoint `k` in a row-major `[T, N, K]`
+/// array with `slots` = N (multiply by the trailing dimension for `[T, N, K, D]`).
+pub fn exo_index(slots: usize, t: usize, slot: usize, k: usize) -> usize {
+    (t * slots + slot) * EXO_KEYPOINT_COUNT + k
 }
 
 /// Rays, validity, gate features and observer masks of one window, given the coarse world

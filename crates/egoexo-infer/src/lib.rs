@@ -1,26 +1,41 @@
-//! The egoexo reconstruction engine.
+//! The egoexo reconstruction engine: an [`AlignedSession`](egoexo_core::aligned::AlignedSession)
+//! in, SMPL motion out, in named passes.
 //!
+//! - [`engine`] — [`Engine`] (the loaded networks and baselines), [`Method`],
+//!   [`Engine::reconstruct`], and the [`Reconstruction`] it returns.
+//! - [`plan`] — the tracking mode (decided once, [`plan::resolve_tracking`]), tracked spans,
+//!   windows and observer slots of a reconstruction.
+//! - [`passes`] — one window at a time: the ego pass (ego features → EgoNet's coarse pose),
+//!   the exo pass (regions → canonical rays → gate features → gate) and the fusion pass, with
+//!   the types between them.
+//! - [`decode`] — window outputs cross-faded into frames, rotated into the world, root
+//!   translation from the head by FK; frames out as soon as they are final.
+//! - [`job`] — [`ReconstructionJob`]: the passes as a resumable computation, one window per
+//!   step, several methods sharing one ego pass.
 //! - [`windows`] — valid spans, 96-frame windows, cross-fade weights.
-//! - [`inputs`] — the networks' input tensors from an aligned session (shared with the
-//!   training shards): ego features, coarse poses, rays, gate features, masks, targets.
-//! - [`models`] — ONNX models loaded from bytes and run by tract.
-//! - [`manifest`] — `models/manifest.json`.
+//! - [`inputs`] — the networks' input tensors (shared with the training shards): ego
+//!   features, coarse poses, rays, gate features, masks, targets.
+//! - [`models`] — ONNX models loaded from bytes and run by tract; [`manifest`] —
+//!   `models/manifest.json`.
 //! - [`baselines`] — rest pose and nearest neighbour.
-//! - [`pipeline`] — [`Engine::reconstruct`]: aligned session → [`Reconstruction`].
-//! - [`scene`] — the viewer's [`egoexo_scene::SceneData`] from a reconstruction.
 //!
 //! Nothing here does I/O (models arrive as bytes), spawns threads or reads the clock, so the
 //! same engine runs in the browser's Web Worker.
 
 pub mod baselines;
+pub mod decode;
+pub mod engine;
 pub mod inputs;
+pub mod job;
 pub mod manifest;
 pub mod models;
-pub mod pipeline;
-pub mod scene;
+pub mod passes;
+pub mod plan;
 pub mod windows;
 
-pub use pipeline::{Engine, Method, ObserverGates, Progress, ReconstructOptions, Reconstruction, Stage};
+pub use engine::{Engine, Method, ObserverGates, Progress, ReconstructOptions, Reconstruction, Stage};
+pub use job::ReconstructionJob;
+pub use models::NetworkRuns;
 
 use thiserror::Error;
 
@@ -47,6 +62,8 @@ pub enum InferError {
     Window(String),
     #[error("ego features: {0}")]
     Features(#[from] egoexo_core::ego_features::FeatureError),
+    #[error("methods: {0}")]
+    Methods(String),
     #[error("cancelled")]
     Cancelled,
 }

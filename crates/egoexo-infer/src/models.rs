@@ -3,19 +3,24 @@
 //! input shapes, and reused for every window.
 
 use std::io::Cursor;
+use std::ops::{Add, Sub};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 
+use serde::{Deserialize, Serialize};
 use tract_onnx::prelude::*;
 
 use crate::InferError;
 use crate::manifest::{ModelFile, ModelSetManifest, sha256_hex};
 
-/// One optimised ONNX graph with fixed input shapes.
+/// One optimised ONNX graph with fixed input shapes. Clones share the graph and the run
+/// counter.
 #[derive(Clone)]
 pub struct OnnxModel {
     name: String,
     plan: Arc<TypedRunnableModel>,
     input_shapes: Vec<Vec<usize>>,
+    runs: Arc<AtomicU64>,
 }
 
 impl std::fmt::Debug for OnnxModel {
@@ -33,7 +38,12 @@ impl OnnxModel {
             model = model.with_input_fact(i, f32::fact(shape).into()).map_err(err)?;
         }
         let plan = model.into_optimized().map_err(err)?.into_runnable().map_err(err)?;
-        Ok(Self { name: name.to_string(), plan, input_shapes: input_shapes.to_vec() })
+        Ok(Self { name: name.to_string(), plan, input_shapes: input_shapes.to_vec(), runs: Arc::default() })
+    }
+
+    /// How many times the model has run (successfully or not) since it was loaded.
+    pub fn runs(&self) -> u64 {
+        self.runs.load(Ordering::Relaxed)
     }
 
     /// The model's name (for errors).
@@ -43,6 +53,7 @@ impl OnnxModel {
 
     /// Runs on row-major `f32` inputs in declaration order; returns every output flattened.
     pub fn run(&self, inputs: &[&[f32]]) -> Result<Vec<Vec<f32>>, InferError> {
+        self.runs.fetch_add(1, Ordering::Relaxed);
         if inputs.len() != self.input_shapes.len() {
             return Err(InferError::Model {
                 model: self.name.clone(),
@@ -74,7 +85,41 @@ pub struct ModelSet {
     pub fusion: OnnxModel,
 }
 
+/// How often each network has run (one run = one window).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct NetworkRuns {
+    pub egonet: u64,
+    pub gate: u64,
+    pub fusion: u64,
+}
+
+impl Add for NetworkRuns {
+    type Output = NetworkRuns;
+
+    fn add(self, o: NetworkRuns) -> NetworkRuns {
+        NetworkRuns { egonet: self.egonet + o.egonet, gate: self.gate + o.gate, fusion: self.fusion + o.fusion }
+    }
+}
+
+impl Sub for NetworkRuns {
+    type Output = NetworkRuns;
+
+    /// Runs between two readings (saturating).
+    fn sub(self, o: NetworkRuns) -> NetworkRuns {
+        NetworkRuns {
+            egonet: self.egonet.saturating_sub(o.egonet),
+            gate: self.gate.saturating_sub(o.gate),
+            fusion: self.fusion.saturating_sub(o.fusion),
+        }
+    }
+}
+
 impl ModelSet {
+    /// How often each of the three networks has run.
+    pub fn runs(&self) -> NetworkRuns {
+        NetworkRuns { egonet: self.egonet.runs(), gate: self.gate.runs(), fusion: self.fusion.runs() }
+    }
+
     /// Loads a model set, reading each file through `read` (a path relative to the models
     /// folder → bytes) and checking its sha256 against the manifest.
     pub fn load(

@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
+use egoexo_core::TrackingMode;
 use egoexo_session::format::save_egoexo;
 
 use super::session_input::SessionInput;
@@ -41,7 +42,7 @@ pub fn run(args: Args) -> Result<()> {
         "wrote {} from a {}: wearer head{}, {} observer(s), {keypoint_frames} keypoint frames, {}",
         args.output.display(),
         imported.source.describe(),
-        if s.wearer.has_wrists() { " + wrists" } else { "" },
+        if s.wearer.tracking_mode() == TrackingMode::ThreePoint { " + wrists" } else { "" },
         s.observers.len(),
         match &s.ground_truth {
             Some(gt) => format!("ground truth of {} frames", gt.motion.len()),

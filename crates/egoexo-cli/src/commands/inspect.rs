@@ -4,9 +4,10 @@
 use std::fmt::Write as _;
 
 use anyhow::{Context, Result};
+use egoexo_core::aligned::AlignedSession;
 use egoexo_core::camera::Projection;
 use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
-use egoexo_session::align::{AlignOptions, AlignedSession, align};
+use egoexo_session::align::{AlignOptions, align};
 use egoexo_session::import::Imported;
 use egoexo_session::model::{Session, Trajectory};
 use serde_json::json;

@@ -5,9 +5,10 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use egoexo_core::TrackingMode;
+use egoexo_infer::plan::resolve_tracking;
 use egoexo_infer::{Engine, Method, ReconstructOptions, Stage};
+use egoexo_motion_io::{Format, write};
 use egoexo_session::align::{AlignOptions, align};
-use egoexo_session::export::{Format, write};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::models::{load_model_set, models_dir, read_manifest};
@@ -52,13 +53,7 @@ pub fn run(args: Args) -> Result<()> {
         eprintln!("warning: {warning}");
     }
     let aligned = align(&imported.session, &AlignOptions { fps: args.fps, ..AlignOptions::default() })?;
-    let tracking = args.tracking.map(TrackingMode::from).unwrap_or(
-        if aligned.left_wrist.is_some() && aligned.right_wrist.is_some() {
-            TrackingMode::ThreePoint
-        } else {
-            TrackingMode::OnePoint
-        },
-    );
+    let tracking = resolve_tracking(&aligned, args.tracking.map(TrackingMode::from))?;
     let dir = models_dir(args.models.as_deref());
     let manifest = read_manifest(&dir)?;
     let set = load_model_set(&dir, &manifest, tracking)?
@@ -74,7 +69,7 @@ pub fn run(args: Args) -> Result<()> {
     let recon = engine.reconstruct(&aligned, &options, &mut |p| {
         bar.set_message(match p.stage {
             Stage::Ego => "ego",
-            Stage::Fusion => "fusion",
+            Stage::Fusion(_) => "fusion",
         });
         bar.set_length(p.total as u64);
         bar.set_position(p.done as u64);

@@ -4,10 +4,11 @@
 use std::path::{Path, PathBuf};
 
 use egoexo_core::TrackingMode;
+use egoexo_core::aligned::AlignedSession;
 use egoexo_infer::InferError;
 use egoexo_infer::manifest::Manifest;
 use egoexo_infer::models::ModelSet;
-use egoexo_session::align::{AlignOptions, AlignedSession, align};
+use egoexo_session::align::{AlignOptions, align};
 use egoexo_synth::procedural::walking_circle;
 use egoexo_synth::{SynthConfig, simulate};
 

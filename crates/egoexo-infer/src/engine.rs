@@ -1,0 +1,285 @@
+//! The reconstruction engine: an aligned session in, SMPL motion out.
+//!
+//! [`Engine::reconstruct`] is a [`ReconstructionJob`] run to the end:
+//! [plan](crate::plan) (tracking mode, tracked spans, windows, observer slots) → per window,
+//! the [ego pass](crate::passes::ego_pass) (ego features, EgoNet's coarse pose) → per window
+//! and method, the [exo pass](crate::passes::exo_pass) (regions, canonical rays, gate) and the
+//! [fusion pass](crate::passes::fusion_pass) → [decode](crate::decode) (cross-fade, world
+//! frame, root translation from the head by FK).
+//!
+//! The same engine runs the networks (`ego-only`, `ego-exo`, `ego-exo-ungated`) and the
+//! baselines (`rest-pose`, `nearest-neighbour`), natively and in the browser's worker. Units:
+//! metres, seconds; world Y-up.
+
+use std::collections::BTreeMap;
+use std::fmt;
+
+use egoexo_core::aligned::AlignedSession;
+use egoexo_core::ego_features::TrackingMode;
+use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
+use egoexo_core::glam::Vec3;
+use egoexo_core::motion::SmplMotion;
+use egoexo_core::skeleton::NUM_JOINTS;
+use serde::{Deserialize, Serialize};
+
+use crate::InferError;
+use crate::baselines::NearestNeighbourIndex;
+use crate::job::ReconstructionJob;
+use crate::models::{ModelSet, NetworkRuns};
+use crate::passes::{CoarsePoseSource, ExoMode};
+use crate::plan::WindowOptions;
+use crate::windows::WINDOW;
+
+/// How to reconstruct.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// Baseline: SMPL rest pose hung from the head, facing the head's heading.
+    RestPose,
+    /// Baseline: per-frame nearest neighbour over training ego features.
+    NearestNeighbour,
+    /// The fusion network with every observer masked out.
+    EgoOnly,
+    /// The full method: gated exo rays fused with the ego stream.
+    EgoExo,
+    /// The fusion network with every valid ray's gate forced to 1 (ablation).
+    EgoExoUngated,
+}
+
+impl Method {
+    /// The name used in tables and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::RestPose => "rest-pose",
+            Method::NearestNeighbour => "nearest-neighbour",
+            Method::EgoOnly => "ego-only",
+            Method::EgoExo => "ego-exo",
+            Method::EgoExoUngated => "ego-exo-ungated",
+        }
+    }
+
+    /// Whether the method runs the ONNX networks.
+    pub fn uses_networks(self) -> bool {
+        matches!(self, Method::EgoOnly | Method::EgoExo | Method::EgoExoUngated)
+    }
+
+    /// How the method treats the observers' rays (`None` for the baselines, which run no
+    /// exo pass).
+    pub fn exo_mode(self) -> Option<ExoMode> {
+        match self {
+            Method::RestPose | Method::NearestNeighbour => None,
+            Method::EgoOnly => Some(ExoMode::Masked),
+            Method::EgoExo => Some(ExoMode::Gated),
+            Method::EgoExoUngated => Some(ExoMode::Ungated),
+        }
+    }
+
+    /// Where the method's coarse pose comes from; methods with the same one can share an
+    /// ego pass.
+    pub fn coarse_pose(self) -> CoarsePose {
+        match self {
+            Method::RestPose => CoarsePose::RestPose,
+            Method::NearestNeighbour => CoarsePose::NearestNeighbour,
+            Method::EgoOnly | Method::EgoExo | Method::EgoExoUngated => CoarsePose::EgoNet,
+        }
+    }
+}
+
+/// The coarse-pose source of a method, without the model or index behind it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum CoarsePose {
+    RestPose,
+    NearestNeighbour,
+    EgoNet,
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Options of one reconstruction.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReconstructOptions {
+    pub method: Method,
+    /// Tracking mode; `None` takes what the wearer's devices allow
+    /// ([`AlignedSession::tracking_mode`]).
+    pub tracking: Option<TrackingMode>,
+    /// Frames between window starts (overlapping windows are cross-faded).
+    pub stride: usize,
+    /// The paper's evaluation protocol: non-overlapping 96-frame segments, no cross-fade.
+    pub non_overlapping: bool,
+}
+
+impl Default for ReconstructOptions {
+    fn default() -> Self {
+        Self { method: Method::EgoExo, tracking: None, stride: WINDOW / 2, non_overlapping: false }
+    }
+}
+
+impl ReconstructOptions {
+    /// How the timeline is cut into windows.
+    pub fn windows(&self) -> WindowOptions {
+        WindowOptions { stride: self.stride, non_overlapping: self.non_overlapping }
+    }
+}
+
+/// Which pass a progress report is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stage {
+    /// The ego pass: ego features and the coarse pose (EgoNet or a baseline), per window.
+    Ego,
+    /// The exo and fusion passes of one method (or, for a baseline, decoding its coarse
+    /// pose), per window.
+    Fusion(Method),
+}
+
+/// A progress report: `done` of `total` windows of a stage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Progress {
+    pub stage: Stage,
+    pub done: usize,
+    pub total: usize,
+}
+
+/// Gate values of one observer: per frame, per exo keypoint (0 where no valid ray).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObserverGates {
+    pub observer_id: String,
+    pub gates: Vec<[f32; EXO_KEYPOINT_COUNT]>,
+}
+
+/// A reconstruction on the aligned session's timeline.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Reconstruction {
+    pub method: Method,
+    pub tracking: TrackingMode,
+    /// Per-frame SMPL parameters (frames without valid tracking hold the nearest valid pose).
+    pub motion: SmplMotion,
+    /// World positions of the 24 joints per frame (metres).
+    pub joints: Vec<[Vec3; NUM_JOINTS]>,
+    /// Frames that were actually reconstructed (wearer tracking valid).
+    pub valid: Vec<bool>,
+    /// Frames where at least one observer contributed a ray with gate ≥ 0.5.
+    pub exo_evidence: Vec<bool>,
+    /// Per observer (session order), per frame, per keypoint gate values.
+    pub gates: Vec<ObserverGates>,
+}
+
+/// The engine: the trained networks (per tracking mode) and the baselines' data.
+#[derive(Clone, Debug, Default)]
+pub struct Engine {
+    models: BTreeMap<u8, ModelSet>,
+    nearest: BTreeMap<u8, NearestNeighbourIndex>,
+}
+
+impl Engine {
+    /// An engine without networks (baselines only until models are added).
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Adds the networks of one tracking mode.
+    pub fn with_models(mut self, models: ModelSet) -> Self {
+        self.models.insert(models.manifest.tracking.points(), models);
+        self
+    }
+
+    /// Adds a nearest-neighbour index for one tracking mode.
+    pub fn with_nearest_neighbour(mut self, tracking: TrackingMode, index: NearestNeighbourIndex) -> Self {
+        self.nearest.insert(tracking.points(), index);
+        self
+    }
+
+    /// The loaded networks of a tracking mode.
+    pub fn models(&self, tracking: TrackingMode) -> Option<&ModelSet> {
+        self.models.get(&tracking.points())
+    }
+
+    /// The loaded networks of a tracking mode, or the error that names the mode.
+    pub(crate) fn require_models(&self, tracking: TrackingMode) -> Result<&ModelSet, InferError> {
+        self.models(tracking).ok_or(InferError::NoModels { points: tracking.points() })
+    }
+
+    /// The model or index behind a coarse-pose source in a tracking mode.
+    pub(crate) fn coarse_pose_source(
+        &self,
+        coarse: CoarsePose,
+        tracking: TrackingMode,
+    ) -> Result<CoarsePoseSource<'_>, InferError> {
+        Ok(match coarse {
+            CoarsePose::RestPose => CoarsePoseSource::RestPose,
+            CoarsePose::NearestNeighbour => CoarsePoseSource::NearestNeighbour(
+                self.nearest
+                    .get(&tracking.points())
+                    .ok_or(InferError::NoNearestNeighbourIndex { points: tracking.points() })?,
+            ),
+            CoarsePose::EgoNet => CoarsePoseSource::EgoNet(&self.require_models(tracking)?.egonet),
+        })
+    }
+
+    /// How often each network of every loaded mode has run, summed over the modes.
+    pub fn network_runs(&self) -> NetworkRuns {
+        self.models.values().map(ModelSet::runs).fold(NetworkRuns::default(), |a, b| a + b)
+    }
+
+    /// Starts a reconstruction of `aligned` with every method of `methods`, sharing one ego
+    /// pass (so the methods must share a coarse-pose source). `options.method` is ignored;
+    /// step the job with [`ReconstructionJob::step`].
+    pub fn start(
+        &self,
+        aligned: &AlignedSession,
+        options: &ReconstructOptions,
+        methods: &[Method],
+    ) -> Result<ReconstructionJob, InferError> {
+        ReconstructionJob::new(self, aligned, options, methods)
+    }
+
+    /// Reconstructs the wearer's motion. `progress` is called after every window of every
+    /// pass; returning `false` cancels (the result is then [`InferError::Cancelled`]).
+    pub fn reconstruct(
+        &self,
+        aligned: &AlignedSession,
+        options: &ReconstructOptions,
+        progress: &mut dyn FnMut(Progress) -> bool,
+    ) -> Result<Reconstruction, InferError> {
+        let mut all = self.reconstruct_each(aligned, options, &[options.method], progress)?;
+        all.pop().ok_or(InferError::Window("no reconstruction".into()))
+    }
+
+    /// Reconstructs with every method of `methods`, results in that order. Methods that share
+    /// a coarse-pose source share one job and so one ego pass (ego-exo, its ungated ablation
+    /// and the ego-only overlay run EgoNet once per window between them); the jobs run in
+    /// the order of their first method.
+    pub fn reconstruct_each(
+        &self,
+        aligned: &AlignedSession,
+        options: &ReconstructOptions,
+        methods: &[Method],
+        progress: &mut dyn FnMut(Progress) -> bool,
+    ) -> Result<Vec<Reconstruction>, InferError> {
+        let mut groups: Vec<(CoarsePose, Vec<usize>)> = Vec::new();
+        for (i, method) in methods.iter().enumerate() {
+            match groups.iter_mut().find(|(coarse, _)| *coarse == method.coarse_pose()) {
+                Some((_, members)) => members.push(i),
+                None => groups.push((method.coarse_pose(), vec![i])),
+            }
+        }
+        let mut results: Vec<Option<Reconstruction>> = vec![None; methods.len()];
+        for (_, members) in groups {
+            let group: Vec<Method> = members.iter().map(|&i| methods[i]).collect();
+            let mut job = self.start(aligned, options, &group)?;
+            while let Some(p) = job.step(self, aligned)? {
+                if !progress(p) {
+                    return Err(InferError::Cancelled);
+                }
+            }
+            for (i, r) in members.into_iter().zip(job.finish(aligned)?) {
+                results[i] = Some(r);
+            }
+        }
+        results.into_iter().map(|r| r.ok_or(InferError::Methods("no method to run".into()))).collect()
+    }
+}

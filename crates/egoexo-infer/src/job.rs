@@ -1,0 +1,159 @@
+//! A reconstruction as a resumable computation: one window of one pass per
+//! [`ReconstructionJob::step`].
+//!
+//! The job holds only its own state (the plan, the ego pass's outputs, one
+//! [`MotionAssembler`] per method); the engine and the aligned session are passed in at every
+//! step, so a caller can give control back between steps — the browser's worker yields to its
+//! event loop there, so that a cancel request is read while a long session runs. Several
+//! methods that share a coarse-pose source (ego-exo and the ego-only overlay) share one ego
+//! pass: EgoNet runs once per window per job.
+//!
+//! Steps, in order: the ego pass over every window, then for each method its exo and fusion
+//! passes over every window (for a baseline, its coarse pose decoded).
+
+use egoexo_core::aligned::AlignedSession;
+
+use crate::InferError;
+use crate::decode::{MotionAssembler, assemble_reconstruction};
+use crate::engine::{CoarsePose, Engine, Method, Progress, ReconstructOptions, Reconstruction, Stage};
+use crate::passes::{EgoPassOutput, WindowOutput, ego_pass, exo_pass, fusion_pass};
+use crate::plan::{ReconstructionPlan, resolve_tracking};
+
+/// One reconstruction of one session with one or more methods (see the module docs).
+#[derive(Clone, Debug)]
+pub struct ReconstructionJob {
+    plan: ReconstructionPlan,
+    methods: Vec<Method>,
+    coarse: CoarsePose,
+    /// The ego pass's output per window (filled by the first pass).
+    ego: Vec<EgoPassOutput>,
+    /// One per method.
+    assemblers: Vec<MotionAssembler>,
+    /// 0: the ego pass; `1 + m`: method `m`'s passes.
+    pass: usize,
+    /// Next window of the current pass.
+    window: usize,
+}
+
+impl ReconstructionJob {
+    /// Plans the job: resolves the tracking mode, checks that every method's models (or
+    /// index) are loaded and that the methods share a coarse-pose source.
+    pub fn new(
+        engine: &Engine,
+        aligned: &AlignedSession,
+        options: &ReconstructOptions,
+        methods: &[Method],
+    ) -> Result<Self, InferError> {
+        let Some(first) = methods.first() else {
+            return Err(InferError::Methods("no method to run".into()));
+        };
+        let coarse = first.coarse_pose();
+        if let Some(other) = methods.iter().find(|m| m.coarse_pose() != coarse) {
+            return Err(InferError::Methods(format!(
+                "{first} and {other} take their coarse poses from different sources and cannot share an ego pass"
+            )));
+        }
+        let tracking = resolve_tracking(aligned, options.tracking)?;
+        engine.coarse_pose_source(coarse, tracking)?;
+        let networks = methods.iter().any(|m| m.exo_mode().is_some());
+        let slots = if networks { engine.require_models(tracking)?.manifest.max_observers } else { 0 };
+        let plan = ReconstructionPlan::new(aligned, tracking, &options.windows(), slots)?;
+        let assemblers =
+            methods.iter().map(|_| MotionAssembler::new(aligned.observers.len(), plan.crossfade_ramp)).collect();
+        Ok(Self {
+            ego: Vec::with_capacity(plan.windows.len()),
+            plan,
+            methods: methods.to_vec(),
+            coarse,
+            assemblers,
+            pass: 0,
+            window: 0,
+        })
+    }
+
+    /// The plan.
+    pub fn plan(&self) -> &ReconstructionPlan {
+        &self.plan
+    }
+
+    /// The methods, in the order of their passes and results.
+    pub fn methods(&self) -> &[Method] {
+        &self.methods
+    }
+
+    /// Steps in the whole job: windows × (1 + methods).
+    pub fn total_steps(&self) -> usize {
+        self.plan.windows.len() * (1 + self.methods.len())
+    }
+
+    /// Steps done so far.
+    pub fn done_steps(&self) -> usize {
+        self.pass * self.plan.windows.len() + self.window
+    }
+
+    /// Runs the next window of the current pass; `None` when every pass is done. `engine` and
+    /// `aligned` must be the ones the job was started with.
+    pub fn step(&mut self, engine: &Engine, aligned: &AlignedSession) -> Result<Option<Progress>, InferError> {
+        let windows = self.plan.windows.len();
+        if self.window == windows && self.pass <= self.methods.len() {
+            self.pass += 1;
+            self.window = 0;
+        }
+        if self.pass > self.methods.len() || windows == 0 {
+            return Ok(None);
+        }
+        self.plan.check_session(aligned)?;
+        let i = self.window;
+        let tracking = self.plan.tracking;
+        let stage = if self.pass == 0 {
+            let source = engine.coarse_pose_source(self.coarse, tracking)?;
+            self.ego.push(ego_pass(aligned, &self.plan.windows[i], tracking, source)?);
+            Stage::Ego
+        } else {
+            let method = self.methods[self.pass - 1];
+            let ego = &self.ego[i];
+            let output = match method.exo_mode() {
+                None => WindowOutput::from_coarse(ego),
+                Some(mode) => {
+                    let models = engine.require_models(tracking)?;
+                    let exo = exo_pass(aligned, models, ego, &self.plan.observers, mode)?;
+                    fusion_pass(models, ego, &exo)?
+                }
+            };
+            self.assemblers[self.pass - 1].add(&output)?;
+            if self.pass == self.methods.len() && i + 1 == windows {
+                // The last pass is done with the ego outputs.
+                self.ego = Vec::new();
+            }
+            Stage::Fusion(method)
+        };
+        self.window += 1;
+        Ok(Some(Progress { stage, done: self.window, total: windows }))
+    }
+
+    /// Whether every step has run.
+    pub fn is_done(&self) -> bool {
+        self.done_steps() >= self.total_steps()
+    }
+
+    /// The reconstructions, one per method in order. Fails unless every step has run.
+    pub fn finish(self, aligned: &AlignedSession) -> Result<Vec<Reconstruction>, InferError> {
+        if !self.is_done() {
+            return Err(InferError::Window(format!(
+                "the job is unfinished: {} of {} steps ran",
+                self.done_steps(),
+                self.total_steps()
+            )));
+        }
+        self.plan.check_session(aligned)?;
+        let tracking = self.plan.tracking;
+        self.methods
+            .iter()
+            .zip(self.assemblers)
+            .map(|(&method, mut assembler)| {
+                let frames = assembler.take_frames(aligned, aligned.timeline.frames);
+                assemble_reconstruction(method, tracking, aligned, frames)
+            })
+            .collect()
+    }
+}

@@ -1,0 +1,116 @@
+#![cfg(not(target_arch = "wasm32"))]
+//! The engine's passes and jobs: methods share one ego pass (EgoNet runs once per window),
+//! a job can be stepped and finished only when done, and feeding windows one at a time
+//! through the passes gives the batch reconstruction, frame by frame as they become final.
+
+mod common;
+
+use common::*;
+use egoexo_core::TrackingMode;
+use egoexo_infer::decode::{MotionAssembler, assemble_reconstruction};
+use egoexo_infer::passes::{CoarsePoseSource, ExoMode, ego_pass, exo_pass, fusion_pass};
+use egoexo_infer::plan::{ReconstructionPlan, resolve_tracking};
+use egoexo_infer::{Engine, InferError, Method, NetworkRuns, ReconstructOptions, Stage};
+
+fn engine() -> Engine {
+    Engine::new()
+        .with_models(fixture_models(TrackingMode::ThreePoint))
+        .with_models(fixture_models(TrackingMode::OnePoint))
+}
+
+#[test]
+fn ego_exo_and_the_ego_only_overlay_share_one_ego_pass() {
+    let aligned = aligned_session(9.0, 2, TrackingMode::ThreePoint, 11);
+    let engine = engine();
+    let options = ReconstructOptions::default();
+    let before = engine.network_runs();
+    let mut stages = Vec::new();
+    let both = engine
+        .reconstruct_each(&aligned, &options, &[Method::EgoExo, Method::EgoOnly], &mut |p| {
+            stages.push(p.stage);
+            true
+        })
+        .unwrap();
+    let runs = engine.network_runs() - before;
+    let windows = stages.iter().filter(|s| **s == Stage::Ego).count();
+    assert!(windows >= 4, "{windows} windows");
+    // EgoNet once per window; the gate only for ego-exo; fusion once per window and method.
+    assert_eq!(runs, NetworkRuns { egonet: windows as u64, gate: windows as u64, fusion: 2 * windows as u64 });
+    let mut order = stages.clone();
+    order.dedup();
+    assert_eq!(order, [Stage::Ego, Stage::Fusion(Method::EgoExo), Stage::Fusion(Method::EgoOnly)]);
+
+    // The same numbers as two separate reconstructions (which run EgoNet twice).
+    for (shared, method) in both.iter().zip([Method::EgoExo, Method::EgoOnly]) {
+        let alone = engine.reconstruct(&aligned, &ReconstructOptions { method, ..options }, &mut |_| true).unwrap();
+        assert_eq!(shared, &alone, "{method}");
+    }
+    let separately = engine.network_runs() - before - runs;
+    assert_eq!(separately.egonet, 2 * windows as u64);
+}
+
+#[test]
+fn methods_with_different_coarse_poses_cannot_share_a_job() {
+    let aligned = aligned_session(3.0, 1, TrackingMode::OnePoint, 12);
+    let err =
+        engine().start(&aligned, &ReconstructOptions::default(), &[Method::EgoExo, Method::RestPose]).unwrap_err();
+    assert!(matches!(err, InferError::Methods(_)), "{err}");
+    assert!(err.to_string().contains("ego-exo and rest-pose"), "{err}");
+    assert!(matches!(engine().start(&aligned, &ReconstructOptions::default(), &[]), Err(InferError::Methods(_))));
+}
+
+#[test]
+fn a_job_steps_window_by_window_and_finishes_only_when_done() {
+    let aligned = aligned_session(6.0, 1, TrackingMode::ThreePoint, 13);
+    let engine = engine();
+    let mut job = engine.start(&aligned, &ReconstructOptions::default(), &[Method::EgoExo]).unwrap();
+    let total = job.total_steps();
+    assert_eq!(total, 2 * job.plan().windows.len());
+    job.step(&engine, &aligned).unwrap().unwrap();
+    assert_eq!(job.done_steps(), 1);
+    let unfinished = job.clone().finish(&aligned).unwrap_err();
+    assert!(unfinished.to_string().contains("1 of"), "{unfinished}");
+    // Another session's timeline is refused rather than indexed.
+    let other = aligned_session(2.0, 1, TrackingMode::ThreePoint, 14);
+    assert!(matches!(job.step(&engine, &other), Err(InferError::Window(_))));
+    let mut steps = 1;
+    while job.step(&engine, &aligned).unwrap().is_some() {
+        steps += 1;
+    }
+    assert_eq!(steps, total);
+    assert!(job.step(&engine, &aligned).unwrap().is_none(), "a finished job stays finished");
+    assert_eq!(job.finish(&aligned).unwrap().len(), 1);
+}
+
+/// What a live caller does: windows through the passes one at a time, each window's frames
+/// taken as soon as the next window starts after them.
+#[test]
+fn windows_one_at_a_time_give_the_batch_reconstruction_frame_by_frame() {
+    let aligned = aligned_session(8.0, 2, TrackingMode::ThreePoint, 15);
+    let engine = engine();
+    let options = ReconstructOptions::default();
+    let batch = engine.reconstruct(&aligned, &options, &mut |_| true).unwrap();
+
+    let tracking = resolve_tracking(&aligned, None).unwrap();
+    let models = engine.models(tracking).unwrap();
+    let plan = ReconstructionPlan::new(&aligned, tracking, &options.windows(), models.manifest.max_observers).unwrap();
+    let mut assembler = MotionAssembler::new(aligned.observers.len(), plan.crossfade_ramp);
+    let mut frames = Vec::new();
+    let mut released = Vec::new();
+    for (i, window) in plan.windows.iter().enumerate() {
+        let ego = ego_pass(&aligned, window, tracking, CoarsePoseSource::EgoNet(&models.egonet)).unwrap();
+        let exo = exo_pass(&aligned, models, &ego, &plan.observers, ExoMode::Gated).unwrap();
+        assembler.add(&fusion_pass(models, &ego, &exo).unwrap()).unwrap();
+        let final_before = plan.windows.get(i + 1).map_or(aligned.timeline.frames, |next| next.frames.start);
+        let out = assembler.take_frames(&aligned, final_before);
+        released.push(out.len());
+        frames.extend(out);
+    }
+    assert!(released.iter().all(|&n| n > 0 && n < aligned.timeline.frames), "frames came out per window: {released:?}");
+    // A window that starts before frames already given out is refused.
+    let late = ego_pass(&aligned, &plan.windows[0], tracking, CoarsePoseSource::RestPose).unwrap();
+    assert!(assembler.add(&egoexo_infer::passes::WindowOutput::from_coarse(&late)).is_err());
+
+    let streamed = assemble_reconstruction(Method::EgoExo, tracking, &aligned, frames).unwrap();
+    assert_eq!(streamed, batch);
+}

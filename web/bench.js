@@ -1,4 +1,7 @@
 // The bench page: the sample through the app's worker, N timed reconstructions, medians.
+// Messages go through the page's WorkerClient, as in the app.
+
+import initViewer, { WorkerClient } from './pkg/egoexo_viewer.js';
 
 const params = new URLSearchParams(location.search);
 const runs = Math.max(1, Number(params.get('runs') ?? 5));
@@ -9,19 +12,25 @@ const say = (line) => {
   log.textContent = lines.join('\n');
 };
 
+await initViewer();
 const worker = new Worker(new URL('worker.js', import.meta.url), { type: 'module' });
+const client = new WorkerClient(worker);
+// The answer to the one request in flight: its result, or its error.
+const ANSWERS = new Set(['imported', 'reconstructed', 'error', 'panic']);
 let pending = null;
 worker.onmessage = ({ data }) => {
-  if (data.type === 'progress' || data.type === 'status' || data.type === 'models') return;
+  const event = client.receive(data);
+  if (!event || !ANSWERS.has(event.type)) return;
   const settle = pending;
   pending = null;
-  if (data.type === 'error' || data.type === 'panic') settle?.reject(new Error(`${data.stage ?? 'panic'}: ${data.message}`));
-  else settle?.resolve(data);
+  if (event.type === 'error' || event.type === 'panic') settle?.reject(new Error(`${event.stage ?? 'panic'}: ${event.message}`));
+  else settle?.resolve(event);
 };
 worker.onerror = (e) => pending?.reject(new Error(e.message || 'worker failed'));
-const request = (message, transfer = []) => new Promise((resolve, reject) => {
+// Sends a request (`send(client)`) and waits for its answer.
+const request = (send) => new Promise((resolve, reject) => {
   pending = { resolve, reject };
-  worker.postMessage(message, transfer);
+  send(client);
 });
 
 const median = (xs) => {
@@ -34,10 +43,15 @@ async function main() {
   const list = await (await fetch('samples/samples.json')).json();
   const sample = list.samples[0];
   const bytes = new Uint8Array(await (await fetch(`samples/${sample.file}`)).arrayBuffer());
-  const { summary } = await request({ type: 'open', input: { kind: 'archive', name: sample.file, bytes } }, [bytes.buffer]);
+  const { summary } = await request((c) => c.open_archive(sample.file, bytes));
   const frames = summary.frames;
   say(`${sample.file}: ${frames} frames, ${summary.observers.length} observers, ${summary.tracking_points}-point tracking`);
-  const time = async (overlay) => (await request({ type: 'reconstruct', overlay })).elapsedMs;
+  // Milliseconds from asking to the scene's arrival (the worker cannot read a clock).
+  const time = async (overlay) => {
+    const started = performance.now();
+    await request((c) => c.reconstruct(overlay));
+    return performance.now() - started;
+  };
   say(`warm-up: ${(await time(false)).toFixed(0)} ms`);
   const egoExo = [];
   const appJob = [];

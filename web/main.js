@@ -1,7 +1,9 @@
 // Page glue: wires the controls to the viewer (pkg/egoexo_viewer.js, wgpu) and to the
-// worker (worker.js → pkg/egoexo_web_worker.js). Every computation happens in Rust.
+// worker (worker.js → pkg/egoexo_web_worker.js). Every computation happens in Rust, and so
+// does every message to and from the worker: `WorkerClient` builds the requests and checks
+// the events (docs/worker-protocol.md); this file reacts to them.
 
-import initViewer, { Viewer } from './pkg/egoexo_viewer.js';
+import initViewer, { Viewer, WorkerClient } from './pkg/egoexo_viewer.js';
 
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
@@ -10,9 +12,12 @@ const SAMPLES_URL = new URL('samples/samples.json', location.href);
 const state = {
   viewer: null,
   worker: null,
+  client: null, // the WorkerClient of `worker`
   busy: false,
   session: null, // the import summary
   scene: null, // the last scene JSON (Uint8Array)
+  summary: null, // the last reconstruction summary
+  reconstructStarted: 0, // performance.now() when the reconstruction was asked for
 };
 // For the end-to-end tests and the curious: the live objects.
 window.egoexo = state;
@@ -61,13 +66,24 @@ const STAGE_TITLES = {
   import: 'Could not import the session',
   reconstruct: 'Reconstruction failed',
   export: 'Export failed',
+  request: 'The worker refused a request',
 };
 
 function spawnWorker() {
   const worker = new Worker(new URL('worker.js', import.meta.url), { type: 'module' });
-  // A replaced (cancelled, crashed) worker's last messages may still be queued: ignore them.
+  const client = new WorkerClient(worker);
+  // A replaced (crashed) worker's last messages may still be queued: ignore them.
   worker.onmessage = (event) => {
-    if (state.worker === worker) onWorkerMessage(event.data);
+    if (state.worker !== worker) return;
+    let message;
+    try {
+      message = client.receive(event.data);
+    } catch (error) {
+      restartWorker();
+      fail('The worker stopped', error.message ?? String(error));
+      return;
+    }
+    if (message) onWorkerEvent(message);
   };
   worker.onerror = (event) => {
     event.preventDefault();
@@ -75,80 +91,88 @@ function spawnWorker() {
     restartWorker();
     fail('The worker stopped', event.message || 'the worker script failed to load');
   };
+  state.worker = worker;
+  state.client = client;
   // Start fetching the models now, while the user picks a session.
-  worker.postMessage({ type: 'warm-up' });
-  return worker;
+  client.warm_up();
 }
 
 function restartWorker() {
   state.worker?.terminate();
-  state.worker = spawnWorker();
+  spawnWorker();
 }
 
-function onWorkerMessage(message) {
-  switch (message.type) {
-    case 'status':
-      if (state.busy) showProgress(message.text, null);
-      break;
+function onWorkerEvent(event) {
+  switch (event.type) {
+    case 'ready':
     case 'models':
+    case 'cancelled':
+      break;
+    case 'status':
+      if (state.busy) showProgress(event.text, null);
       break;
     case 'progress': {
-      const label = message.stage === 'import' ? 'importing the session…' : `${message.stage}`;
-      const fraction = message.total > 0 ? message.done / message.total : null;
-      showProgress(message.stage === 'import' ? label : `${label} — ${Math.round(100 * fraction)}%`, fraction);
+      if (event.stage === 'import') {
+        showProgress('importing the session…', null);
+        break;
+      }
+      const fraction = event.total > 0 ? event.done / event.total : null;
+      showProgress(`${event.label} — ${Math.round(100 * fraction)}%`, fraction);
       break;
     }
     case 'imported':
-      state.session = message.summary;
-      showSession(message.summary);
+      state.session = event.summary;
+      showSession(event.summary);
       showProgress('reconstructing…', 0);
-      state.worker.postMessage({ type: 'reconstruct', overlay: true });
+      state.reconstructStarted = performance.now();
+      state.client.reconstruct(true);
       break;
     case 'reconstructed':
-      showScene(message.scene, message.summary, message.elapsedMs);
+      showScene(event.scene, event.summary, performance.now() - state.reconstructStarted);
       break;
     case 'exported':
-      download(message.bytes, message.fileName, message.mimeType);
+      download(event.file.bytes, event.file.file_name, event.file.mime_type);
       setBusy(false);
       setState('ready');
       break;
     case 'error':
-      if (message.stage === 'models' && message.message.includes('manifest.json: HTTP 404')) {
-        fail(STAGE_TITLES.models, `${message.message}\nThis copy of the app was built without models/.`);
+      if (event.kind === 'models-missing') {
+        fail(STAGE_TITLES.models, `${event.message}\nThis copy of the app was built without models/.`);
       } else {
-        fail(STAGE_TITLES[message.stage] ?? 'Error', message.message);
+        fail(STAGE_TITLES[event.stage] ?? 'Error', event.message);
       }
       break;
     case 'panic':
       // The worker's wasm module is dead after a panic: replace the worker.
       restartWorker();
-      fail('The worker crashed (a bug in egoexo — please report it)', `${message.message}\nThe worker has been restarted.`);
+      fail('The worker crashed (a bug in egoexo — please report it)', `${event.message}\nThe worker has been restarted.`);
       break;
     default:
-      console.warn('unexpected worker message', message);
+      console.warn('unexpected worker event', event);
   }
 }
 
 // ---------------------------------------------------------------- loading sessions
 
-function startJob(input) {
+// Starts an import: `open(client)` sends the request (its bytes go to the worker).
+function startJob(open) {
   if (state.busy) return;
   clearError();
   setBusy(true);
   setState('busy');
   showProgress('starting…', null);
-  const transfer = input.kind === 'archive' ? [input.bytes.buffer] : input.contents.map((c) => c.buffer);
-  state.worker.postMessage({ type: 'open', input }, transfer);
+  open(state.client);
 }
 
 async function openArchive(file) {
-  startJob({ kind: 'archive', name: file.name, bytes: new Uint8Array(await file.arrayBuffer()) });
+  const bytes = new Uint8Array(await file.arrayBuffer());
+  startJob((client) => client.open_archive(file.name, bytes));
 }
 
 async function openFolder(name, entries) {
   // entries: [{path, file}] with paths relative to the dropped folder's parent.
   const contents = await Promise.all(entries.map(async (e) => new Uint8Array(await e.file.arrayBuffer())));
-  startJob({ kind: 'files', name, paths: entries.map((e) => e.path), contents });
+  startJob((client) => client.open_files(name, entries.map((e) => e.path), contents));
 }
 
 async function openSample() {
@@ -156,8 +180,8 @@ async function openSample() {
     clearError();
     const list = await fetchOk(SAMPLES_URL).then((r) => r.json());
     const sample = list.samples[0];
-    const bytes = await fetchOk(new URL(sample.file, SAMPLES_URL)).then((r) => r.arrayBuffer());
-    startJob({ kind: 'archive', name: sample.file.split('/').pop(), bytes: new Uint8Array(bytes) });
+    const bytes = new Uint8Array(await fetchOk(new URL(sample.file, SAMPLES_URL)).then((r) => r.arrayBuffer()));
+    startJob((client) => client.open_archive(sample.file.split('/').pop(), bytes));
   } catch (error) {
     fail('Could not load the sample', error.message);
   }
@@ -239,6 +263,7 @@ function showScene(scene, summary, elapsedMs) {
     if (!viewer) throw new Error('the 3D view could not start (see above)');
     viewer.set_scene_json(scene);
     state.scene = scene;
+    state.summary = summary;
   } catch (error) {
     fail('Cannot show the reconstruction', error.message ?? String(error));
     return;
@@ -295,7 +320,6 @@ function onFrame(frame, timeSeconds) {
 }
 
 async function startViewer() {
-  await initViewer();
   const canvas = $('view');
   const preference = params.get('backend') ?? 'auto';
   try {
@@ -330,8 +354,9 @@ function wireControls() {
   });
   $('sample-button').addEventListener('click', openSample);
   $('cancel-button').addEventListener('click', () => {
-    // The worker is busy in Rust: stop it and start a fresh one (models come from the cache).
-    restartWorker();
+    // The worker stops at its next window and keeps its models; events of the cancelled
+    // job are dropped by the client.
+    state.client.cancel();
     setBusy(false);
     showError('Cancelled', 'The reconstruction was cancelled.');
     setState('cancelled');
@@ -361,13 +386,14 @@ function wireControls() {
     button.addEventListener('click', () => {
       if (state.busy) return;
       setBusy(true);
-      state.worker.postMessage({ type: 'export', format: button.dataset.format });
+      state.client.export(button.dataset.format);
     });
   }
 }
 
+await initViewer();
 wireControls();
-state.worker = spawnWorker();
+spawnWorker();
 setBusy(false);
 await startViewer();
 if (document.body.dataset.state === 'starting') setState('idle');

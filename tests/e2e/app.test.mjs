@@ -57,6 +57,10 @@ describe('the sample, WebGL2 canvas', () => {
     assert.match(facts, /observer-1/);
     assert.match(facts, /3-point tracking/);
     assert.match(await app.text('#result-facts'), /MPJPE vs ground truth/);
+    // The ego-only overlay reuses the ego pass: EgoNet ran once per window for the whole job.
+    const summary = await page.evaluate(() => window.egoexo.summary);
+    assert.ok(summary.windows > 0, JSON.stringify(summary));
+    assert.deepEqual(summary.network_runs, { egonet: summary.windows, gate: summary.windows, fusion: 2 * summary.windows });
   });
 
   test('plays: the frame advances, and the timeline steps and scrubs', async () => {
@@ -188,17 +192,21 @@ describe('bad input and failures', () => {
     }
   });
 
-  test('cancel stops the reconstruction, and a new worker takes over', async () => {
+  test('cancel stops the reconstruction between windows, and the same worker takes the next job', async () => {
     const app = await openApp(browser, '?backend=webgl2');
     try {
       await app.waitState('idle');
       // Cancel as soon as the page shows a reconstruction stage, in the page itself: a click
       // from the test process could come after the (quick) reconstruction has finished.
       const stage = await app.page.evaluate(() => new Promise((resolve) => {
+        window.workerEvents = [];
+        window.egoexo.worker.addEventListener('message', (e) => window.workerEvents.push([e.data.type, e.data.job]));
+        window.workerBeforeCancel = window.egoexo.worker;
         const text = document.getElementById('progress-text');
         const observer = new MutationObserver(() => {
           if (!/ego pass|exo fusion|overlay/.test(text.textContent)) return;
           observer.disconnect();
+          window.cancelledJob = window.egoexo.client.current_job();
           document.getElementById('cancel-button').click();
           resolve(text.textContent);
         });
@@ -207,12 +215,16 @@ describe('bad input and failures', () => {
       }));
       assert.match(stage, /ego pass|exo fusion|overlay/);
       assert.equal(await app.waitState(['cancelled', 'ready']), 'cancelled');
-      // The cancelled worker's queued result must not show up afterwards.
+      // The worker answers the cancel itself, and the cancelled job never delivers a result.
+      await app.page.waitForFunction(() => window.workerEvents.some(([type, job]) => type === 'cancelled' && job === window.cancelledJob));
       await app.page.waitForTimeout(500);
       assert.equal(await app.page.evaluate(() => document.body.dataset.state), 'cancelled');
+      const results = await app.page.evaluate(() => window.workerEvents.filter(([type, job]) => type === 'reconstructed' && job === window.cancelledJob));
+      assert.deepEqual(results, []);
       assert.equal(await app.text('#error-title'), 'Cancelled');
       assert.equal(await app.page.locator('#progress-panel').isHidden(), true);
-      // The replacement worker answers (models from the Cache API): a quick failing import.
+      // The same worker (its models still loaded) answers the next job: a quick failing import.
+      assert.equal(await app.page.evaluate(() => window.egoexo.worker === window.workerBeforeCancel), true);
       await app.page.setInputFiles('#file-input', { name: 'empty.zip', mimeType: 'application/zip', buffer: Buffer.alloc(0) });
       assert.equal(await app.waitState(['error', 'ready']), 'error');
       assert.match(await app.text('#error-message'), /^empty\.zip: the file is empty/);
@@ -226,7 +238,7 @@ describe('bad input and failures', () => {
     const app = await openApp(browser, '?backend=webgl2');
     try {
       await app.waitState('idle');
-      await app.page.evaluate(() => window.egoexo.worker.postMessage({ type: 'panic-for-test' }));
+      await app.page.evaluate(() => window.egoexo.client.panic_for_test());
       assert.equal(await app.waitState(['error']), 'error');
       assert.match(await app.text('#error-title'), /worker crashed/);
       assert.match(await app.text('#error-message'), /a panic requested by the test suite/);

@@ -1,4 +1,4 @@
-//! What the viewer draws, as plain data: built by the worker (`egoexo_infer::scene`) from a
+//! What the viewer draws, as plain data: built by the worker (`egoexo_web_worker::scene`) from a
 //! reconstruction, sent to the page (serde / structured clone), rendered by `egoexo-viewer`.
 //! Nothing here computes geometry; every position is already in the world.
 //!

@@ -1,7 +1,8 @@
-//! The page-side egoexo viewer: renders an [`egoexo_scene::SceneData`] with wgpu (WebGPU, with a
-//! WebGL2 fallback) and owns the 3D view's UI state — orbit camera, playback, layer toggles,
-//! keyboard shortcuts. It computes no geometry: every position in the scene is already in the
-//! world (Y-up, metres).
+//! The page-side egoexo module: renders an [`egoexo_scene::SceneData`] with wgpu (WebGPU, with
+//! a WebGL2 fallback) and owns the 3D view's UI state — orbit camera, playback, layer toggles,
+//! keyboard shortcuts — and, as `WorkerClient`, speaks the page's end of the worker protocol
+//! (`egoexo_protocol::worker`). It computes no geometry: every position in the scene is
+//! already in the world (Y-up, metres).
 //!
 //! # What is drawn
 //! A floor grid at `floor_y`; the reconstructed SMPL skeleton (joints as spheres, bones as
@@ -36,6 +37,12 @@
 //! viewer.failure();                  // undefined, or why drawing stopped for good
 //! viewer.free();
 //! const rgba = await Viewer.render_offscreen(sceneJsonBytes, frame, width, height, 'auto');
+//!
+//! const client = new WorkerClient(new Worker('worker.js', { type: 'module' }));
+//! client.warm_up();                            // load the models now
+//! const job = client.open_archive(name, bytes); // or open_files(name, paths, contents)
+//! client.reconstruct(true); client.export('glb'); client.cancel();
+//! worker.onmessage = (e) => { const event = client.receive(e.data); if (event) … };
 //! ```
 //! `timeSeconds` counts from the first frame (`frame / fps`); the session clock adds
 //! `SceneData::start_s`. Errors are JS `Error`s whose message says what was wrong (the scene's
@@ -80,7 +87,7 @@ pub mod scene;
 mod web;
 
 #[cfg(target_arch = "wasm32")]
-pub use web::Viewer;
+pub use web::{Viewer, WorkerClient};
 
 pub use error::{ActiveBackend, BackendPreference, ViewerError};
 

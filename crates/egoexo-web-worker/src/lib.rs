@@ -2,20 +2,23 @@
 //!
 //! - [`worker`] — [`SessionWorker`]: load the models (sha256-checked), import a session
 //!   (`.egoexo`, a zip, or a dropped folder of an Aria MPS / Nymeria layout), reconstruct it
-//!   (ego-exo plus the ego-only overlay) with progress and cancel, build the viewer's scene,
-//!   export the motion (AMASS npz, BVH, glb, CSV).
-//! - [`summary`] — the plain data reported to the page.
-//! - `bindings` (wasm32 only) — the JS API: `WorkerApp`, `ExportedFile`,
-//!   `install_panic_reporter`; errors become JS `Error`s with the Rust message verbatim.
+//!   step by step (ego-exo plus the ego-only overlay, one shared ego pass), build the
+//!   viewer's scene, export the motion (AMASS npz, BVH, glb, CSV). Plain Rust; the native
+//!   tests drive it directly.
+//! - [`scene`] — the viewer's [`egoexo_scene::SceneData`] from the aligned session and its
+//!   reconstructions.
+//! - `runtime` (wasm32 only) — `WorkerApp`, the message loop: requests and events of the
+//!   page ↔ worker protocol (`egoexo_protocol::worker`, `docs/worker-protocol.md`), model
+//!   fetching with the Cache API, cooperative cancel between windows, panic reporting.
 //!
-//! `web/worker.js` drives it; `web/main.js` never touches this module. Nothing here reads
-//! the clock or spawns threads; timing belongs to the page.
+//! `web/worker.js` only creates the `WorkerApp` and hands it the page's messages. Nothing
+//! here reads the clock or spawns threads; timing belongs to the page.
 
 #[cfg(target_arch = "wasm32")]
-mod bindings;
-pub mod summary;
+mod runtime;
+pub mod scene;
 pub mod worker;
 
 #[cfg(target_arch = "wasm32")]
-pub use bindings::{ExportedFileJs, WorkerApp, install_panic_reporter, panic_for_test};
-pub use worker::{ExportedFile, SessionWorker, WorkerError};
+pub use runtime::{MODEL_CACHE, TEST_PANIC_MESSAGE, WorkerApp};
+pub use worker::{ExportedFile, JobProgress, ReconstructionTask, SessionWorker, WorkerError};

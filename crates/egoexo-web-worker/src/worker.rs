@@ -1,33 +1,37 @@
 //! [`SessionWorker`]: the worker's state and operations in plain Rust — load the models,
-//! import a session, reconstruct it (ego-exo plus the ego-only overlay), build the viewer's
-//! scene, export the motion. The wasm-bindgen layer ([`crate::bindings`]) only converts
-//! JS values; everything that can fail is here and returns [`WorkerError`].
+//! import a session, reconstruct it step by step (ego-exo plus the ego-only overlay, sharing
+//! one ego pass), build the viewer's scene, export the motion. The browser's message loop
+//! ([`crate::WorkerApp`], wasm32 only) and the native tests drive the same code; everything
+//! that can fail returns [`WorkerError`], whose [`WorkerError::kind`] is what the page sees.
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
+use egoexo_core::aligned::AlignedSession;
 use egoexo_core::camera::Projection;
 use egoexo_core::metrics::MetricsAccumulator;
 use egoexo_infer::manifest::Manifest;
 use egoexo_infer::models::ModelSet;
-use egoexo_infer::{Engine, InferError, Method, Progress, ReconstructOptions, Reconstruction, Stage};
+use egoexo_infer::{
+    Engine, InferError, Method, NetworkRuns, ReconstructOptions, Reconstruction, ReconstructionJob, Stage,
+};
+use egoexo_motion_io::{ExportError, Format};
+use egoexo_protocol::worker::{
+    self as protocol, Accuracy, ErrorKind, ExportFormat, JobStage, ModelFileRef, ModelSetSummary, ModelsSummary,
+    ObserverSummary, ReconstructionSummary, SessionSummary,
+};
 use egoexo_session::align::DEFAULT_FPS;
-use egoexo_session::export::{self, ExportError, Format};
 use egoexo_session::{
-    AlignError, AlignOptions, AlignedSession, FileTree, ImportError, ImportOptions, Imported, Limits, align,
-    import_session,
+    AlignError, AlignOptions, FileTree, ImportError, ImportOptions, Imported, Limits, align, import_session,
 };
 use thiserror::Error;
 
-use crate::summary::{
-    Accuracy, JobProgress, JobStage, ModelFileRef, ModelSetSummary, ModelsSummary, ObserverSummary,
-    ReconstructionSummary, SessionSummary,
-};
-
 /// Everything that can go wrong in the worker. Library errors keep their exact messages
-/// (the importer's name the file, line/field and what was expected).
+/// (the importers' name the file, line/field and what was expected).
 #[derive(Debug, Error)]
 pub enum WorkerError {
+    #[error(transparent)]
+    Models(InferError),
     #[error(transparent)]
     Import(#[from] ImportError),
     #[error("{session}: {source}")]
@@ -44,6 +48,26 @@ pub enum WorkerError {
     NoReconstruction,
     #[error("cannot build the scene: {0}")]
     Scene(String),
+}
+
+impl WorkerError {
+    /// The protocol's kind of this error.
+    pub fn kind(&self) -> ErrorKind {
+        match self {
+            WorkerError::Models(_) => ErrorKind::ModelsInvalid,
+            WorkerError::NoModels => ErrorKind::ModelsMissing,
+            WorkerError::Import(_) | WorkerError::Align { .. } => ErrorKind::Import,
+            WorkerError::Infer(_) | WorkerError::Scene(_) => ErrorKind::Reconstruct,
+            WorkerError::Export(_) => ErrorKind::Export,
+            WorkerError::NoSession => ErrorKind::NoSession,
+            WorkerError::NoReconstruction => ErrorKind::NoReconstruction,
+        }
+    }
+
+    /// Whether this is the engine's answer to a cancel.
+    pub fn is_cancelled(&self) -> bool {
+        matches!(self, WorkerError::Infer(InferError::Cancelled))
+    }
 }
 
 /// An imported session, aligned on the timeline the models run at.
@@ -70,6 +94,22 @@ pub struct ExportedFile {
     pub mime_type: &'static str,
 }
 
+/// Progress of a whole reconstruction: `done` of `total` window steps over every pass.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct JobProgress {
+    pub stage: JobStage,
+    pub done: usize,
+    pub total: usize,
+}
+
+/// A reconstruction under way ([`SessionWorker::start_reconstruction`]): the engine's job
+/// with ego-exo (and the ego-only overlay) sharing one ego pass.
+#[derive(Debug)]
+pub struct ReconstructionTask {
+    job: ReconstructionJob,
+    runs_before: NetworkRuns,
+}
+
 /// The worker: models, the open session and its reconstructions.
 #[derive(Debug, Default)]
 pub struct SessionWorker {
@@ -87,7 +127,7 @@ impl SessionWorker {
     /// The files a manifest lists (paths relative to the models folder), for the caller to
     /// fetch before [`SessionWorker::load_models`].
     pub fn model_files(manifest_json: &[u8]) -> Result<Vec<ModelFileRef>, WorkerError> {
-        let manifest = Manifest::from_json(manifest_json)?;
+        let manifest = Manifest::from_json(manifest_json).map_err(WorkerError::Models)?;
         Ok(manifest
             .model_sets
             .iter()
@@ -103,11 +143,11 @@ impl SessionWorker {
         manifest_json: &[u8],
         mut read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
     ) -> Result<ModelsSummary, WorkerError> {
-        let manifest = Manifest::from_json(manifest_json)?;
+        let manifest = Manifest::from_json(manifest_json).map_err(WorkerError::Models)?;
         let mut engine = Engine::new();
         let mut sets = Vec::new();
         for set in &manifest.model_sets {
-            engine = engine.with_models(ModelSet::load(set, &mut read)?);
+            engine = engine.with_models(ModelSet::load(set, &mut read).map_err(WorkerError::Models)?);
             sets.push(ModelSetSummary {
                 tracking_points: set.tracking.points(),
                 max_observers: set.max_observers,
@@ -123,6 +163,11 @@ impl SessionWorker {
     /// Whether models are loaded.
     pub fn has_models(&self) -> bool {
         self.engine.is_some()
+    }
+
+    /// How often each network has run since the models were loaded.
+    pub fn network_runs(&self) -> NetworkRuns {
+        self.engine.as_ref().map(Engine::network_runs).unwrap_or_default()
     }
 
     /// Imports a zip archive (`.egoexo` or a zipped Aria MPS / Nymeria folder) from its bytes.
@@ -152,19 +197,20 @@ impl SessionWorker {
         Ok(summary)
     }
 
+    /// The open session on the models' timeline, if any.
+    pub fn aligned_session(&self) -> Option<&AlignedSession> {
+        self.session.as_ref().map(|s| &s.aligned)
+    }
+
     /// The frame rate the models were trained at (the default timeline rate without models).
     fn fps(&self) -> f32 {
         self.manifest.as_ref().map_or(DEFAULT_FPS, |m| m.fps)
     }
 
-    /// Reconstructs the open session with the full method and, if `ego_only_overlay`, again
-    /// ego-only for the comparison overlay. `progress` is called after every window of every
-    /// pass; returning `false` cancels ([`InferError::Cancelled`]).
-    pub fn reconstruct(
-        &mut self,
-        ego_only_overlay: bool,
-        progress: &mut dyn FnMut(JobProgress) -> bool,
-    ) -> Result<ReconstructionSummary, WorkerError> {
+    /// Starts reconstructing the open session with the full method and, if
+    /// `ego_only_overlay`, ego-only for the comparison overlay (one shared ego pass). The
+    /// previous results are dropped. Step it with [`SessionWorker::step_reconstruction`].
+    pub fn start_reconstruction(&mut self, ego_only_overlay: bool) -> Result<ReconstructionTask, WorkerError> {
         let engine = self.engine.as_ref().ok_or(WorkerError::NoModels)?;
         let fps = self.fps();
         let open = self.session.as_mut().ok_or(WorkerError::NoSession)?;
@@ -172,30 +218,56 @@ impl SessionWorker {
             open.aligned = align_for(&open.imported, fps)?;
         }
         self.results = None;
-        let aligned = &open.aligned;
-        let passes = if ego_only_overlay { 2 } else { 1 };
-        let run = |method: Method, pass: usize, progress: &mut dyn FnMut(JobProgress) -> bool| {
-            let options = ReconstructOptions { method, ..ReconstructOptions::default() };
-            engine.reconstruct(aligned, &options, &mut |p: Progress| {
-                // Each pass has an ego and a fusion stage over the same windows.
-                let per_pass = 2 * p.total;
-                let done_in_pass = match p.stage {
-                    Stage::Ego => p.done,
-                    Stage::Fusion => p.total + p.done,
-                };
-                let stage = match (pass, p.stage) {
-                    (1.., _) => JobStage::EgoOnlyOverlay,
-                    (0, Stage::Ego) => JobStage::EgoPass,
-                    (0, Stage::Fusion) => JobStage::Fusion,
-                };
-                progress(JobProgress { stage, done: pass * per_pass + done_in_pass, total: passes * per_pass })
-            })
+        let methods: &[Method] = if ego_only_overlay { &[Method::EgoExo, Method::EgoOnly] } else { &[Method::EgoExo] };
+        let options = ReconstructOptions::default();
+        let job = engine.start(&open.aligned, &options, methods)?;
+        Ok(ReconstructionTask { job, runs_before: engine.network_runs() })
+    }
+
+    /// Runs the next window of `task`; `None` when every pass is done.
+    pub fn step_reconstruction(&self, task: &mut ReconstructionTask) -> Result<Option<JobProgress>, WorkerError> {
+        let engine = self.engine.as_ref().ok_or(WorkerError::NoModels)?;
+        let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
+        let Some(progress) = task.job.step(engine, &open.aligned)? else { return Ok(None) };
+        let stage = match progress.stage {
+            Stage::Ego => JobStage::EgoPass,
+            Stage::Fusion(Method::EgoOnly) => JobStage::EgoOnlyOverlay,
+            Stage::Fusion(_) => JobStage::ExoFusion,
         };
-        let ego_exo = run(Method::EgoExo, 0, progress)?;
-        let ego_only = if ego_only_overlay { Some(run(Method::EgoOnly, 1, progress)?) } else { None };
-        let summary = reconstruction_summary(aligned, &ego_exo, ego_only.as_ref());
+        Ok(Some(JobProgress { stage, done: task.job.done_steps(), total: task.job.total_steps() }))
+    }
+
+    /// Finishes `task` (every step must have run) and keeps its results for the scene and
+    /// the exports.
+    pub fn finish_reconstruction(&mut self, task: ReconstructionTask) -> Result<ReconstructionSummary, WorkerError> {
+        let engine = self.engine.as_ref().ok_or(WorkerError::NoModels)?;
+        let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
+        let windows = task.job.plan().windows.len();
+        let runs = engine.network_runs() - task.runs_before;
+        let mut reconstructions = task.job.finish(&open.aligned)?.into_iter();
+        let ego_exo = reconstructions.next().ok_or(WorkerError::NoReconstruction)?;
+        let ego_only = reconstructions.next();
+        let summary = reconstruction_summary(&open.aligned, &ego_exo, ego_only.as_ref(), windows, runs);
         self.results = Some(Results { ego_exo, ego_only, summary: summary.clone() });
         Ok(summary)
+    }
+
+    /// Reconstructs the open session in one go ([`SessionWorker::start_reconstruction`], every
+    /// step, [`SessionWorker::finish_reconstruction`]). `progress` is called after every
+    /// window of every pass; returning `false` cancels ([`InferError::Cancelled`]) and keeps no
+    /// result.
+    pub fn reconstruct(
+        &mut self,
+        ego_only_overlay: bool,
+        progress: &mut dyn FnMut(JobProgress) -> bool,
+    ) -> Result<ReconstructionSummary, WorkerError> {
+        let mut task = self.start_reconstruction(ego_only_overlay)?;
+        while let Some(p) = self.step_reconstruction(&mut task)? {
+            if !progress(p) {
+                return Err(InferError::Cancelled.into());
+            }
+        }
+        self.finish_reconstruction(task)
     }
 
     /// The last reconstruction (the full method), if any.
@@ -217,21 +289,32 @@ impl SessionWorker {
     pub fn scene_json(&self) -> Result<Vec<u8>, WorkerError> {
         let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
         let results = self.results.as_ref().ok_or(WorkerError::NoReconstruction)?;
-        let scene = egoexo_infer::scene::build_scene(&open.aligned, &results.ego_exo, results.ego_only.as_ref());
+        let scene = crate::scene::build_scene(&open.aligned, &results.ego_exo, results.ego_only.as_ref());
         scene.check().map_err(WorkerError::Scene)?;
         serde_json::to_vec(&scene).map_err(|e| WorkerError::Scene(e.to_string()))
     }
 
     /// Writes the reconstructed motion (the full method) in `format`.
-    pub fn export(&self, format: Format) -> Result<ExportedFile, WorkerError> {
+    pub fn export(&self, format: ExportFormat) -> Result<ExportedFile, WorkerError> {
         let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
         let results = self.results.as_ref().ok_or(WorkerError::NoReconstruction)?;
-        let bytes = export::write(format, &results.ego_exo.motion)?;
+        let format = motion_format(format);
+        let bytes = egoexo_motion_io::write(format, &results.ego_exo.motion)?;
         Ok(ExportedFile {
             bytes,
             file_name: format!("{}-{}.{}", open.aligned.name, results.ego_exo.method.name(), format.extension()),
             mime_type: format.mime_type(),
         })
+    }
+}
+
+/// The motion file format of a protocol export format.
+pub fn motion_format(format: ExportFormat) -> Format {
+    match format {
+        ExportFormat::Npz => Format::Npz,
+        ExportFormat::Bvh => Format::Bvh,
+        ExportFormat::Glb => Format::Glb,
+        ExportFormat::Csv => Format::Csv,
     }
 }
 
@@ -276,7 +359,7 @@ fn session_summary(imported: &Imported, aligned: &AlignedSession) -> SessionSumm
         fps: timeline.fps,
         duration_s: timeline.frames as f32 / timeline.fps,
         devices,
-        tracking_points: if session.wearer.has_wrists() { 3 } else { 1 },
+        tracking_points: aligned.tracking_mode().points(),
         observers,
         ground_truth: aligned.ground_truth.is_some(),
         warnings,
@@ -287,6 +370,8 @@ fn reconstruction_summary(
     aligned: &AlignedSession,
     ego_exo: &Reconstruction,
     ego_only: Option<&Reconstruction>,
+    windows: usize,
+    runs: NetworkRuns,
 ) -> ReconstructionSummary {
     let accuracy = aligned.ground_truth.as_ref().and_then(|gt| {
         let truth: Vec<_> = gt.poses.iter().map(|p| aligned.skeleton.forward_kinematics(p).positions).collect();
@@ -310,6 +395,8 @@ fn reconstruction_summary(
         tracking_points: ego_exo.tracking.points(),
         frames: ego_exo.joints.len(),
         valid_frames: ego_exo.valid.iter().filter(|&&v| v).count(),
+        windows,
+        network_runs: protocol::NetworkRuns { egonet: runs.egonet, gate: runs.gate, fusion: runs.fusion },
         exo_evidence_frames: ego_exo.exo_evidence.iter().filter(|&&v| v).count(),
         observer_ray_frames: observers_used.into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
         accuracy,

@@ -11,12 +11,14 @@ use std::collections::BTreeMap;
 use std::io::{Cursor, Read};
 
 use common::*;
+use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
+use egoexo_core::glam::Vec3;
 use egoexo_infer::InferError;
+use egoexo_protocol::worker::{ErrorKind, ExportFormat, JobStage, NetworkRuns};
 use egoexo_scene::SceneData;
-use egoexo_session::export::Format;
 use egoexo_session::{FileTree, ImportError, Limits};
-use egoexo_web_worker::summary::{JobProgress, JobStage};
-use egoexo_web_worker::{SessionWorker, WorkerError};
+use egoexo_web_worker::worker::motion_format;
+use egoexo_web_worker::{JobProgress, SessionWorker, WorkerError};
 
 fn read_fixture_model(file: &str) -> Result<Vec<u8>, InferError> {
     model_file(file)
@@ -136,28 +138,47 @@ fn reconstruction_matches_the_recording() {
 }
 
 #[test]
-fn progress_covers_every_window_of_both_passes_in_order() {
+fn progress_covers_every_window_of_every_pass_in_order() {
     let (worker, reports) = reconstructed();
     let total = reports[0].total;
     assert!(reports.iter().all(|p| p.total == total));
     assert_eq!(reports.iter().map(|p| p.done).collect::<Vec<_>>(), (1..=total).collect::<Vec<_>>());
-    // Four equal parts: ego pass, fusion, then the overlay's two stages.
-    assert_eq!(total % 4, 0);
-    let windows = total / 4;
+    // Three equal parts: the shared ego pass, ego-exo's fusion, then the overlay's fusion.
+    assert_eq!(total % 3, 0);
+    let windows = total / 3;
     assert!(windows >= 3, "{windows} windows");
     let stages: Vec<JobStage> = reports.iter().map(|p| p.stage).collect();
     assert!(stages[..windows].iter().all(|&s| s == JobStage::EgoPass));
-    assert!(stages[windows..2 * windows].iter().all(|&s| s == JobStage::Fusion));
+    assert!(stages[windows..2 * windows].iter().all(|&s| s == JobStage::ExoFusion));
     assert!(stages[2 * windows..].iter().all(|&s| s == JobStage::EgoOnlyOverlay));
     let summary = worker.reconstruction_summary().unwrap();
     assert_eq!(summary.method, "ego-exo");
     assert_eq!(summary.tracking_points, 3);
     assert_eq!(summary.valid_frames, summary.frames);
+    assert_eq!(summary.windows, windows);
     let accuracy = summary.accuracy.as_ref().unwrap();
     assert_eq!(accuracy.frames, summary.frames);
     assert!(accuracy.ego_exo_mpjpe_cm.is_finite() && accuracy.ego_exo_mpjpe_cm > 0.0);
     assert!(accuracy.ego_only_mpjpe_cm.is_some_and(f64::is_finite));
     assert_eq!(summary.observer_ray_frames.keys().collect::<Vec<_>>(), ["observer-1", "observer-2"]);
+}
+
+/// The app's whole job (ego-exo and the ego-only overlay) runs EgoNet once per window: the
+/// overlay reuses the ego pass. Counted on the models themselves.
+#[test]
+fn egonet_runs_once_per_window_for_ego_exo_and_the_overlay() {
+    let mut worker = worker_with_models();
+    worker.import_archive(SESSION_NAME, SESSION.to_vec()).unwrap();
+    let before = worker.network_runs();
+    let summary = worker.reconstruct(true, &mut |_| true).unwrap();
+    let runs = worker.network_runs() - before;
+    let windows = summary.windows as u64;
+    assert!(windows >= 3);
+    assert_eq!((runs.egonet, runs.gate, runs.fusion), (windows, windows, 2 * windows));
+    assert_eq!(summary.network_runs, NetworkRuns { egonet: windows, gate: windows, fusion: 2 * windows });
+    // Without the overlay: one fusion per window.
+    let alone = worker.reconstruct(false, &mut |_| true).unwrap();
+    assert_eq!(alone.network_runs, NetworkRuns { egonet: windows, gate: windows, fusion: windows });
 }
 
 #[test]
@@ -173,7 +194,7 @@ fn without_the_overlay_only_one_pass_runs() {
         .unwrap();
     let last = last.unwrap();
     assert_eq!(last.done, last.total);
-    assert_eq!(last.stage, JobStage::Fusion);
+    assert_eq!(last.stage, JobStage::ExoFusion);
     assert!(worker.ego_only_reconstruction().is_none());
     let scene: SceneData = serde_json::from_slice(&worker.scene_json().unwrap()).unwrap();
     assert!(scene.ego_only_joints.is_none());
@@ -206,7 +227,7 @@ fn cancelling_stops_the_job_and_keeps_no_result() {
             calls < 3
         })
         .unwrap_err();
-    assert!(matches!(err, WorkerError::Infer(InferError::Cancelled)), "{err}");
+    assert!(err.is_cancelled(), "{err}");
     assert_eq!(calls, 3);
     assert!(worker.reconstruction().is_none());
     assert!(matches!(worker.scene_json(), Err(WorkerError::NoReconstruction)));
@@ -218,11 +239,11 @@ fn cancelling_stops_the_job_and_keeps_no_result() {
 fn exports_every_format_of_the_reconstruction() {
     let (worker, _) = reconstructed();
     let motion = &worker.reconstruction().unwrap().motion;
-    for format in Format::ALL {
+    for format in ExportFormat::ALL {
         let file = worker.export(format).unwrap();
         assert_eq!(file.file_name, format!("105_36-ego-exo.{}", format.extension()));
-        assert_eq!(file.mime_type, format.mime_type());
-        assert_eq!(file.bytes, egoexo_session::export::write(format, motion).unwrap(), "{format}");
+        assert_eq!(file.mime_type, motion_format(format).mime_type());
+        assert_eq!(file.bytes, egoexo_motion_io::write(motion_format(format), motion).unwrap(), "{format:?}");
     }
 }
 
@@ -234,6 +255,7 @@ fn a_malformed_file_is_the_importers_error_verbatim() {
     let err = worker.import_archive("broken.egoexo", garbage).unwrap_err();
     assert_eq!(err.to_string(), expected.to_string());
     assert!(err.to_string().starts_with("broken.egoexo"), "{err}");
+    assert_eq!(err.kind(), ErrorKind::Import);
 
     // A folder that is no known layout names what it found.
     let err = worker.import_files("notes", [("notes/readme.txt".to_string(), b"hi".to_vec())]).unwrap_err();
@@ -269,7 +291,9 @@ fn operations_out_of_order_say_what_is_missing() {
     let mut worker = worker_with_models();
     assert!(matches!(worker.reconstruct(true, &mut |_| true), Err(WorkerError::NoSession)));
     worker.import_archive(SESSION_NAME, SESSION.to_vec()).unwrap();
-    assert!(matches!(worker.export(Format::Bvh), Err(WorkerError::NoReconstruction)));
+    let err = worker.export(ExportFormat::Bvh).unwrap_err();
+    assert!(matches!(err, WorkerError::NoReconstruction));
+    assert_eq!(err.kind(), ErrorKind::NoReconstruction);
 }
 
 #[test]
@@ -286,7 +310,39 @@ fn a_model_file_that_does_not_match_the_manifest_is_refused() {
         .unwrap_err();
     let message = err.to_string();
     assert!(message.contains("3pt/gate.onnx") && message.contains("sha256"), "{message}");
+    assert_eq!(err.kind(), ErrorKind::ModelsInvalid);
     assert!(!worker.has_models());
     let err = SessionWorker::new().load_models(b"{\"format_version\": 99}", read_fixture_model).unwrap_err();
     assert!(err.to_string().contains("manifest.json"), "{err}");
+}
+
+#[test]
+fn the_scene_puts_rays_on_the_lines_of_sight_and_is_consistent() {
+    let (worker, _) = reconstructed();
+    let aligned = worker.aligned_session().unwrap();
+    let recon = worker.reconstruction().unwrap();
+    let scene: SceneData = serde_json::from_slice(&worker.scene_json().unwrap()).unwrap();
+    scene.check().unwrap();
+    assert_eq!(scene.frames, aligned.timeline.frames);
+    assert_eq!(scene.devices.len(), 3);
+    assert!(scene.ground_truth_joints.is_some() && scene.ego_only_joints.is_some());
+    let mut rays = 0;
+    for (o, observer) in scene.observers.iter().enumerate() {
+        assert!(observer.half_fov.iter().all(|a| *a > 0.5 && *a < 1.5), "{:?}", observer.half_fov);
+        for f in 0..scene.frames {
+            let centre = Vec3::from_slice(&observer.camera_poses[7 * f + 4..7 * f + 7]);
+            for k in 0..EXO_KEYPOINT_COUNT {
+                let r = &observer.rays[4 * (f * EXO_KEYPOINT_COUNT + k)..4 * (f * EXO_KEYPOINT_COUNT + k) + 4];
+                if r[3] == 0.0 && r[0] == 0.0 {
+                    continue;
+                }
+                rays += 1;
+                // The endpoint lies at the observer–wearer head distance from the camera.
+                let head = aligned.head.poses[f].translation;
+                assert!((Vec3::from_slice(&r[..3]).distance(centre) - head.distance(centre)).abs() < 1e-3);
+                assert!((r[3] - recon.gates[o].gates[f][k]).abs() < 1e-6);
+            }
+        }
+    }
+    assert!(rays > 100, "{rays} rays drawn");
 }

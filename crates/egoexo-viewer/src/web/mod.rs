@@ -1,9 +1,12 @@
-//! The browser side: wgpu devices and surfaces, the renderer, off-screen rendering, and the
-//! `Viewer` JS class. Compiled only for `wasm32`.
+//! The browser side: wgpu devices and surfaces, the renderer, off-screen rendering, the
+//! `Viewer` JS class, and the page's end of the worker protocol (`WorkerClient`). Compiled
+//! only for `wasm32`.
 
 mod gpu;
 mod offscreen;
 mod renderer;
 mod viewer;
+mod worker_client;
 
 pub use viewer::Viewer;
+pub use worker_client::WorkerClient;

@@ -1,0 +1,526 @@
+//! The page ↔ Web Worker protocol, version [`WORKER_PROTOCOL_VERSION`]
+//! (`docs/worker-protocol.md` is the reader's version of this module).
+//!
+//! The page sends [`WorkerRequest`]s; the worker answers with [`WorkerEvent`]s. Both are JS
+//! objects tagged by `type` (kebab-case), built and read by Rust on both ends: the page's
+//! `WorkerClient` (egoexo-viewer) makes the requests, the worker's `WorkerApp`
+//! (egoexo-web-worker) reads them and posts the events. The JS glue only moves them.
+//!
+//! Jobs: `open`, `reconstruct` and `export` carry a [`JobId`] chosen by the page; every event
+//! about a job carries it back, so the page can drop the events of a job it cancelled or
+//! replaced. The worker runs requests one at a time in arrival order; `cancel` is read
+//! between the windows of a reconstruction, which then ends with `cancelled` instead of a
+//! result (the worker and its loaded models stay).
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+/// The protocol's version; the worker says it in [`WorkerEvent::Ready`], and the page refuses
+/// a worker that speaks another.
+pub const WORKER_PROTOCOL_VERSION: u32 = 1;
+
+/// A job's number, chosen by the page (unique per worker).
+pub type JobId = u32;
+
+/// Page → worker.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(
+    tag = "type",
+    rename_all = "kebab-case",
+    bound(serialize = "B: Serialize", deserialize = "B: Deserialize<'de>")
+)]
+pub enum WorkerRequest<B> {
+    /// Load the models now (otherwise the first job does), while the user picks a session.
+    WarmUp,
+    /// Import a session (replacing the open one) and align it on the models' timeline.
+    /// Answered by `imported` or `error`.
+    Open { job: JobId, input: SessionInput<B> },
+    /// Reconstruct the open session (ego-exo, and with `overlay` the ego-only comparison).
+    /// Answered by `progress` events, then `reconstructed`, `cancelled` or `error`.
+    Reconstruct { job: JobId, overlay: bool },
+    /// Write the last reconstruction as a motion file. Answered by `exported` or `error`.
+    Export { job: JobId, format: ExportFormat },
+    /// Stop job `job`: a queued job never starts, a running reconstruction stops at its next
+    /// window; either answers `cancelled`. A finished job is not affected.
+    Cancel { job: JobId },
+    /// Panic inside the worker's Rust code (tests of the page's crash handling).
+    PanicForTest,
+}
+
+impl<B> WorkerRequest<B> {
+    /// The job the request starts, if it starts one.
+    pub fn job(&self) -> Option<JobId> {
+        match self {
+            WorkerRequest::Open { job, .. }
+            | WorkerRequest::Reconstruct { job, .. }
+            | WorkerRequest::Export { job, .. } => Some(*job),
+            WorkerRequest::WarmUp | WorkerRequest::Cancel { .. } | WorkerRequest::PanicForTest => None,
+        }
+    }
+
+    /// The byte buffers in the request (to transfer rather than copy when posting it).
+    pub fn byte_buffers(&self) -> Vec<&B> {
+        match self {
+            WorkerRequest::Open { input: SessionInput::Archive { bytes, .. }, .. } => vec![bytes],
+            WorkerRequest::Open { input: SessionInput::Files { files, .. }, .. } => {
+                files.iter().map(|f| &f.bytes).collect()
+            }
+            _ => Vec::new(),
+        }
+    }
+
+    /// The same request with every byte buffer converted by `f`, in
+    /// [`WorkerRequest::byte_buffers`] order.
+    pub fn try_map_bytes<C, E>(self, mut f: impl FnMut(B) -> Result<C, E>) -> Result<WorkerRequest<C>, E> {
+        Ok(match self {
+            WorkerRequest::WarmUp => WorkerRequest::WarmUp,
+            WorkerRequest::Open { job, input: SessionInput::Archive { name, bytes } } => {
+                WorkerRequest::Open { job, input: SessionInput::Archive { name, bytes: f(bytes)? } }
+            }
+            WorkerRequest::Open { job, input: SessionInput::Files { name, files } } => {
+                let files = files
+                    .into_iter()
+                    .map(|file| Ok(DroppedFile { path: file.path, bytes: f(file.bytes)? }))
+                    .collect::<Result<_, E>>()?;
+                WorkerRequest::Open { job, input: SessionInput::Files { name, files } }
+            }
+            WorkerRequest::Reconstruct { job, overlay } => WorkerRequest::Reconstruct { job, overlay },
+            WorkerRequest::Export { job, format } => WorkerRequest::Export { job, format },
+            WorkerRequest::Cancel { job } => WorkerRequest::Cancel { job },
+            WorkerRequest::PanicForTest => WorkerRequest::PanicForTest,
+        })
+    }
+}
+
+/// What the user gave: one file, or a dropped folder.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(
+    tag = "kind",
+    rename_all = "kebab-case",
+    bound(serialize = "B: Serialize", deserialize = "B: Deserialize<'de>")
+)]
+pub enum SessionInput<B> {
+    /// A zip archive: `.egoexo`, or a zipped Aria MPS / Nymeria folder.
+    Archive { name: String, bytes: B },
+    /// A folder: every file with its `/`-separated path below the folder's parent.
+    Files { name: String, files: Vec<DroppedFile<B>> },
+}
+
+/// One file of a dropped folder.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(bound(serialize = "B: Serialize", deserialize = "B: Deserialize<'de>"))]
+pub struct DroppedFile<B> {
+    pub path: String,
+    pub bytes: B,
+}
+
+/// A motion file format the worker exports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ExportFormat {
+    /// AMASS-style SMPL parameters (`.npz`).
+    Npz,
+    /// Biovision hierarchy (`.bvh`).
+    Bvh,
+    /// glTF binary (`.glb`).
+    Glb,
+    /// Joint positions (`.csv`).
+    Csv,
+}
+
+impl ExportFormat {
+    pub const ALL: [ExportFormat; 4] = [ExportFormat::Npz, ExportFormat::Bvh, ExportFormat::Glb, ExportFormat::Csv];
+
+    /// The file extension (also the wire name).
+    pub fn extension(self) -> &'static str {
+        match self {
+            ExportFormat::Npz => "npz",
+            ExportFormat::Bvh => "bvh",
+            ExportFormat::Glb => "glb",
+            ExportFormat::Csv => "csv",
+        }
+    }
+
+    /// The format of an extension (`"glb"`), ASCII case ignored.
+    pub fn from_extension(extension: &str) -> Option<ExportFormat> {
+        ExportFormat::ALL.into_iter().find(|f| f.extension().eq_ignore_ascii_case(extension))
+    }
+}
+
+/// Worker → page.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(
+    tag = "type",
+    rename_all = "kebab-case",
+    bound(serialize = "B: Serialize", deserialize = "B: Deserialize<'de>")
+)]
+pub enum WorkerEvent<B> {
+    /// The worker runs and speaks protocol `protocol`; sent once, first.
+    Ready { protocol: u32 },
+    /// What the worker is doing outside a job (e.g. "loading the models…").
+    Status { text: String },
+    /// The models are loaded.
+    Models { summary: ModelsSummary },
+    /// `done` of `total` steps of job `job`; `label` is what a progress bar says.
+    Progress { job: JobId, stage: JobStage, label: String, done: usize, total: usize },
+    /// The session of job `job` is open.
+    Imported { job: JobId, summary: SessionSummary },
+    /// The reconstruction of job `job`: the viewer's scene (`SceneData` as JSON bytes, for
+    /// `Viewer.set_scene_json`) and its summary.
+    Reconstructed { job: JobId, scene: B, summary: ReconstructionSummary },
+    /// The file of export job `job`.
+    Exported { job: JobId, file: ExportedFile<B> },
+    /// Job `job` was cancelled; nothing of it is kept.
+    Cancelled { job: JobId },
+    /// A job (or, with `job` null, the model loading of a warm-up) failed.
+    Error {
+        job: Option<JobId>,
+        /// What was being done.
+        stage: ErrorStage,
+        /// What went wrong, for the page to react to.
+        kind: ErrorKind,
+        /// The Rust error's message, word for word (an importer's names the file, the
+        /// line/field and what was expected).
+        message: String,
+    },
+    /// The worker's Rust code panicked: the module is dead and the worker must be replaced.
+    Panic { message: String },
+}
+
+impl<B> WorkerEvent<B> {
+    /// The job the event is about, if any.
+    pub fn job(&self) -> Option<JobId> {
+        match self {
+            WorkerEvent::Progress { job, .. }
+            | WorkerEvent::Imported { job, .. }
+            | WorkerEvent::Reconstructed { job, .. }
+            | WorkerEvent::Exported { job, .. }
+            | WorkerEvent::Cancelled { job } => Some(*job),
+            WorkerEvent::Error { job, .. } => *job,
+            WorkerEvent::Ready { .. }
+            | WorkerEvent::Status { .. }
+            | WorkerEvent::Models { .. }
+            | WorkerEvent::Panic { .. } => None,
+        }
+    }
+
+    /// The byte buffers in the event (to transfer rather than copy when posting it).
+    pub fn byte_buffers(&self) -> Vec<&B> {
+        match self {
+            WorkerEvent::Reconstructed { scene, .. } => vec![scene],
+            WorkerEvent::Exported { file, .. } => vec![&file.bytes],
+            _ => Vec::new(),
+        }
+    }
+
+    /// The same event with every byte buffer converted by `f`, in
+    /// [`WorkerEvent::byte_buffers`] order.
+    pub fn try_map_bytes<C, E>(self, mut f: impl FnMut(B) -> Result<C, E>) -> Result<WorkerEvent<C>, E> {
+        Ok(match self {
+            WorkerEvent::Reconstructed { job, scene, summary } => {
+                WorkerEvent::Reconstructed { job, scene: f(scene)?, summary }
+            }
+            WorkerEvent::Exported { job, file } => WorkerEvent::Exported {
+                job,
+                file: ExportedFile { bytes: f(file.bytes)?, file_name: file.file_name, mime_type: file.mime_type },
+            },
+            WorkerEvent::Ready { protocol } => WorkerEvent::Ready { protocol },
+            WorkerEvent::Status { text } => WorkerEvent::Status { text },
+            WorkerEvent::Models { summary } => WorkerEvent::Models { summary },
+            WorkerEvent::Progress { job, stage, label, done, total } => {
+                WorkerEvent::Progress { job, stage, label, done, total }
+            }
+            WorkerEvent::Imported { job, summary } => WorkerEvent::Imported { job, summary },
+            WorkerEvent::Cancelled { job } => WorkerEvent::Cancelled { job },
+            WorkerEvent::Error { job, stage, kind, message } => WorkerEvent::Error { job, stage, kind, message },
+            WorkerEvent::Panic { message } => WorkerEvent::Panic { message },
+        })
+    }
+}
+
+/// A file made by an export.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(bound(serialize = "B: Serialize", deserialize = "B: Deserialize<'de>"))]
+pub struct ExportedFile<B> {
+    pub bytes: B,
+    /// `<session>-<method>.<extension>`.
+    pub file_name: String,
+    /// The media type, for the download.
+    pub mime_type: String,
+}
+
+/// Which part of a job a progress report is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum JobStage {
+    /// Reading and aligning the session.
+    Import,
+    /// Ego features and EgoNet's coarse pose, per window (shared by ego-exo and the overlay).
+    EgoPass,
+    /// Regions, rays, gates and fusion of ego-exo, per window.
+    ExoFusion,
+    /// The fusion of the ego-only comparison overlay, per window.
+    EgoOnlyOverlay,
+}
+
+impl JobStage {
+    /// What the progress bar says.
+    pub fn label(self) -> &'static str {
+        match self {
+            JobStage::Import => "importing the session",
+            JobStage::EgoPass => "ego pass",
+            JobStage::ExoFusion => "exo fusion",
+            JobStage::EgoOnlyOverlay => "ego-only overlay",
+        }
+    }
+}
+
+/// What the failing request was doing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ErrorStage {
+    /// Fetching, checking and loading the models.
+    Models,
+    /// Importing a session.
+    Import,
+    /// Reconstructing.
+    Reconstruct,
+    /// Exporting.
+    Export,
+    /// Reading the request itself.
+    Request,
+}
+
+/// What went wrong, as the page tells it apart.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ErrorKind {
+    /// `models/manifest.json` does not exist (HTTP 404): this copy of the app has no models.
+    ModelsMissing,
+    /// A model file could not be fetched (network, HTTP status).
+    ModelsUnavailable,
+    /// The manifest or a model file is malformed, of another layout, or fails its sha256.
+    ModelsInvalid,
+    /// The input is not a session egoexo can read (the message names file, line/field and
+    /// what was expected).
+    Import,
+    /// Reconstruction failed (e.g. the wearer is never tracked).
+    Reconstruct,
+    /// The motion could not be written.
+    Export,
+    /// A request needs a session and none is open.
+    NoSession,
+    /// A request needs a reconstruction and there is none.
+    NoReconstruction,
+    /// The message is not a request of this protocol version.
+    BadRequest,
+}
+
+/// One file a models manifest lists.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ModelFileRef {
+    /// Path relative to the models folder.
+    pub file: String,
+    /// Lowercase hex sha256 the file must have.
+    pub sha256: String,
+    pub bytes: u64,
+}
+
+/// The networks of one tracking mode.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ModelSetSummary {
+    pub tracking_points: u8,
+    pub max_observers: usize,
+    pub hidden_dim: usize,
+}
+
+/// The loaded models.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ModelsSummary {
+    pub model_sets: Vec<ModelSetSummary>,
+    /// Total size of the ONNX files.
+    pub bytes: u64,
+}
+
+/// One observer of an imported session.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ObserverSummary {
+    pub id: String,
+    /// Projection model and image size, e.g. `fisheye624 1408×1408`.
+    pub camera: String,
+    /// Timeline frames with at least one 2D keypoint.
+    pub keypoint_frames: usize,
+}
+
+/// An imported session, on the models' timeline.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SessionSummary {
+    pub name: String,
+    /// What the input was recognised as (`.egoexo session`, `Nymeria sequence`, …).
+    pub source: String,
+    /// Frames of the aligned timeline.
+    pub frames: usize,
+    pub fps: f32,
+    pub duration_s: f32,
+    /// Wearer devices: `head`, and `left_wrist` / `right_wrist` when tracked.
+    pub devices: Vec<String>,
+    /// 1 (glasses) or 3 (glasses + both wrists).
+    pub tracking_points: u8,
+    pub observers: Vec<ObserverSummary>,
+    /// Whether the session carries ground-truth motion.
+    pub ground_truth: bool,
+    /// What the import noticed (each `file: message`).
+    pub warnings: Vec<String>,
+}
+
+/// Errors against ground truth, where the session has it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Accuracy {
+    /// Frames scored (reconstructed and with ground truth).
+    pub frames: usize,
+    pub ego_exo_mpjpe_cm: f64,
+    pub ego_only_mpjpe_cm: Option<f64>,
+}
+
+/// How often each network ran for one job (one run = one 96-frame window).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct NetworkRuns {
+    pub egonet: u64,
+    pub gate: u64,
+    pub fusion: u64,
+}
+
+/// A finished reconstruction.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReconstructionSummary {
+    pub method: String,
+    pub tracking_points: u8,
+    pub frames: usize,
+    /// Frames with valid wearer tracking (the rest hold the nearest valid pose).
+    pub valid_frames: usize,
+    /// 96-frame windows over the tracked frames.
+    pub windows: usize,
+    /// Network runs of this job: EgoNet once per window, shared by ego-exo and the overlay.
+    pub network_runs: NetworkRuns,
+    /// Frames where an observer ray had gate ≥ 0.5.
+    pub exo_evidence_frames: usize,
+    /// Per observer: frames where it contributed at least one ray.
+    pub observer_ray_frames: BTreeMap<String, usize>,
+    pub accuracy: Option<Accuracy>,
+}
+
+#[cfg(test)]
+mod tests {
+    use serde_json::json;
+
+    use super::*;
+    use crate::ByteBuf;
+
+    type Request = WorkerRequest<ByteBuf>;
+    type Event = WorkerEvent<ByteBuf>;
+
+    #[test]
+    fn requests_have_the_documented_shape() {
+        let open: Request = serde_json::from_value(
+            json!({"type": "open", "job": 3, "input": {"kind": "archive", "name": "a.egoexo", "bytes": [80, 75]}}),
+        )
+        .unwrap();
+        assert_eq!(
+            open,
+            WorkerRequest::Open {
+                job: 3,
+                input: SessionInput::Archive { name: "a.egoexo".into(), bytes: ByteBuf::from(vec![80, 75]) }
+            }
+        );
+        assert_eq!(open.job(), Some(3));
+        assert_eq!(open.byte_buffers().len(), 1);
+        let folder: Request = serde_json::from_value(json!({"type": "open", "job": 4, "input": {
+            "kind": "files", "name": "walk", "files": [{"path": "walk/a.csv", "bytes": [1]}, {"path": "walk/b", "bytes": []}]
+        }}))
+        .unwrap();
+        assert_eq!(folder.byte_buffers().len(), 2);
+        for (value, expected) in [
+            (json!({"type": "warm-up"}), WorkerRequest::WarmUp),
+            (json!({"type": "panic-for-test"}), WorkerRequest::PanicForTest),
+            (
+                json!({"type": "reconstruct", "job": 5, "overlay": true}),
+                WorkerRequest::Reconstruct { job: 5, overlay: true },
+            ),
+            (
+                json!({"type": "export", "job": 6, "format": "glb"}),
+                WorkerRequest::Export { job: 6, format: ExportFormat::Glb },
+            ),
+            (json!({"type": "cancel", "job": 5}), WorkerRequest::Cancel { job: 5 }),
+        ] {
+            let request: Request = serde_json::from_value(value.clone()).unwrap();
+            assert_eq!(request, expected);
+            assert_eq!(serde_json::to_value(&request).unwrap(), value);
+        }
+    }
+
+    #[test]
+    fn malformed_requests_are_refused_with_what_is_wrong() {
+        for (value, needle) in [
+            (json!({"type": "reconstruct"}), "job"),
+            (json!({"type": "export", "job": 1, "format": "fbx"}), "fbx"),
+            (json!({"type": "explode"}), "explode"),
+            (json!({"job": 1}), "type"),
+            (json!({"type": "open", "job": 1, "input": {"kind": "archive", "name": "x"}}), "bytes"),
+        ] {
+            let err = serde_json::from_value::<Request>(value.clone()).unwrap_err().to_string();
+            assert!(err.contains(needle), "{value}: {err}");
+        }
+    }
+
+    #[test]
+    fn events_have_the_documented_shape() {
+        let error: Event = WorkerEvent::Error {
+            job: None,
+            stage: ErrorStage::Models,
+            kind: ErrorKind::ModelsMissing,
+            message: "cannot fetch models/manifest.json: HTTP 404 Not Found".into(),
+        };
+        assert_eq!(
+            serde_json::to_value(&error).unwrap(),
+            json!({"type": "error", "job": null, "stage": "models", "kind": "models-missing",
+                   "message": "cannot fetch models/manifest.json: HTTP 404 Not Found"})
+        );
+        let progress: Event = WorkerEvent::Progress {
+            job: 2,
+            stage: JobStage::EgoOnlyOverlay,
+            label: JobStage::EgoOnlyOverlay.label().into(),
+            done: 3,
+            total: 9,
+        };
+        assert_eq!(
+            serde_json::to_value(&progress).unwrap(),
+            json!({"type": "progress", "job": 2, "stage": "ego-only-overlay", "label": "ego-only overlay", "done": 3, "total": 9})
+        );
+        let exported: Event = WorkerEvent::Exported {
+            job: 7,
+            file: ExportedFile {
+                bytes: ByteBuf::from(vec![1, 2]),
+                file_name: "a-ego-exo.bvh".into(),
+                mime_type: "text/plain".into(),
+            },
+        };
+        assert_eq!(exported.job(), Some(7));
+        assert_eq!(exported.byte_buffers(), [&ByteBuf::from(vec![1, 2])]);
+        let back: Event = serde_json::from_value(serde_json::to_value(&exported).unwrap()).unwrap();
+        assert_eq!(back, exported);
+        assert_eq!(
+            serde_json::to_value(WorkerEvent::<ByteBuf>::Ready { protocol: WORKER_PROTOCOL_VERSION }).unwrap()["type"],
+            "ready"
+        );
+    }
+
+    #[test]
+    fn export_formats_are_their_extensions() {
+        for f in ExportFormat::ALL {
+            assert_eq!(serde_json::to_value(f).unwrap(), json!(f.extension()));
+            assert_eq!(ExportFormat::from_extension(&f.extension().to_uppercase()), Some(f));
+        }
+        assert_eq!(ExportFormat::from_extension("fbx"), None);
+    }
+}

@@ -1,0 +1,158 @@
+//! `WorkerClient`: the page's end of the page ↔ worker protocol (`egoexo_protocol::worker`,
+//! `docs/worker-protocol.md`). It builds every request the page sends, numbers the jobs, and
+//! reads every event the worker posts — checking it against the protocol and dropping the
+//! events of jobs the page has cancelled or replaced — so `web/main.js` never writes or
+//! matches a message by hand.
+
+use egoexo_protocol::JsBytes;
+use egoexo_protocol::js::event_from_js;
+use egoexo_protocol::worker::{
+    DroppedFile, ExportFormat, JobId, SessionInput, WORKER_PROTOCOL_VERSION, WorkerEvent, WorkerRequest,
+};
+use js_sys::{Array, Object, Uint8Array};
+use serde::Serialize;
+use wasm_bindgen::prelude::*;
+use web_sys::Worker;
+
+type Request = WorkerRequest<JsBytes>;
+type Event = WorkerEvent<JsBytes>;
+
+/// Talks to one `worker.js` Web Worker.
+#[wasm_bindgen]
+#[derive(Debug)]
+pub struct WorkerClient {
+    worker: Worker,
+    /// The last job number handed out.
+    last_job: JobId,
+    /// The job whose events the page wants.
+    current: Option<JobId>,
+}
+
+#[wasm_bindgen]
+impl WorkerClient {
+    /// A client for `worker` (a module worker running `worker.js`).
+    #[wasm_bindgen(constructor)]
+    pub fn new(worker: Worker) -> WorkerClient {
+        WorkerClient { worker, last_job: 0, current: None }
+    }
+
+    /// The protocol version this page speaks.
+    pub fn protocol_version() -> u32 {
+        WORKER_PROTOCOL_VERSION
+    }
+
+    /// Asks the worker to load the models now.
+    pub fn warm_up(&self) -> Result<(), JsError> {
+        self.send(&Request::WarmUp)
+    }
+
+    /// Opens a zip archive (`.egoexo`, or a zipped Aria MPS / Nymeria folder); `bytes` is
+    /// transferred to the worker. Returns the job number.
+    pub fn open_archive(&mut self, name: String, bytes: Uint8Array) -> Result<JobId, JsError> {
+        let job = self.next_job();
+        self.send(&Request::Open { job, input: SessionInput::Archive { name, bytes: JsBytes(bytes) } })?;
+        Ok(job)
+    }
+
+    /// Opens a dropped folder: `paths[i]` (relative, `/`-separated) holds `contents[i]`; the
+    /// contents are transferred to the worker. Returns the job number.
+    pub fn open_files(
+        &mut self,
+        name: String,
+        paths: Vec<String>,
+        contents: Vec<Uint8Array>,
+    ) -> Result<JobId, JsError> {
+        if paths.len() != contents.len() {
+            return Err(JsError::new(&format!("{} paths but {} file contents", paths.len(), contents.len())));
+        }
+        let files = paths.into_iter().zip(contents).map(|(path, bytes)| DroppedFile { path, bytes: JsBytes(bytes) });
+        let job = self.next_job();
+        self.send(&Request::Open { job, input: SessionInput::Files { name, files: files.collect() } })?;
+        Ok(job)
+    }
+
+    /// Reconstructs the open session (with the ego-only overlay when `overlay`). Returns the
+    /// job number.
+    pub fn reconstruct(&mut self, overlay: bool) -> Result<JobId, JsError> {
+        let job = self.next_job();
+        self.send(&Request::Reconstruct { job, overlay })?;
+        Ok(job)
+    }
+
+    /// Exports the reconstruction as `format` (`npz`, `bvh`, `glb` or `csv`). Returns the job
+    /// number.
+    pub fn export(&mut self, format: &str) -> Result<JobId, JsError> {
+        let format = ExportFormat::from_extension(format)
+            .ok_or_else(|| JsError::new(&format!("unknown export format `{format}`: expected npz, bvh, glb or csv")))?;
+        let job = self.next_job();
+        self.send(&Request::Export { job, format })?;
+        Ok(job)
+    }
+
+    /// Cancels the current job; its events from now on are dropped by [`Self::receive`].
+    /// Returns its number, if there was one.
+    pub fn cancel(&mut self) -> Result<Option<JobId>, JsError> {
+        let Some(job) = self.current.take() else { return Ok(None) };
+        self.send(&Request::Cancel { job })?;
+        Ok(Some(job))
+    }
+
+    /// The job whose events [`Self::receive`] passes on.
+    pub fn current_job(&self) -> Option<JobId> {
+        self.current
+    }
+
+    /// Makes the worker's Rust code panic (tests of the page's crash handling).
+    pub fn panic_for_test(&self) -> Result<(), JsError> {
+        self.send(&Request::PanicForTest)
+    }
+
+    /// Reads a message from the worker (`event.data`): the event as a plain object (see
+    /// `docs/worker-protocol.md`), or `null` when it is about a job that is no longer the
+    /// current one. Throws on a message that is no event of this protocol, or on a worker
+    /// that speaks another version.
+    pub fn receive(&mut self, data: JsValue) -> Result<JsValue, JsError> {
+        let event: Event = event_from_js(&data)
+            .map_err(|e| JsError::new(&format!("the worker sent something that is no event of the protocol: {e}")))?;
+        if let WorkerEvent::Ready { protocol } = event
+            && protocol != WORKER_PROTOCOL_VERSION
+        {
+            return Err(JsError::new(&format!(
+                "the worker speaks protocol version {protocol}, this page {WORKER_PROTOCOL_VERSION}: reload the page"
+            )));
+        }
+        if event.job().is_some_and(|job| Some(job) != self.current) {
+            return Ok(JsValue::NULL);
+        }
+        to_js(&event)
+    }
+}
+
+impl WorkerClient {
+    fn next_job(&mut self) -> JobId {
+        self.last_job = self.last_job.wrapping_add(1).max(1);
+        self.current = Some(self.last_job);
+        self.last_job
+    }
+
+    /// Posts `request`, transferring its byte buffers (each once).
+    fn send(&self, request: &Request) -> Result<(), JsError> {
+        let transfer = Array::new();
+        for bytes in request.byte_buffers() {
+            let buffer = bytes.buffer();
+            if !transfer.iter().any(|b| Object::is(&b, &buffer)) {
+                transfer.push(&buffer);
+            }
+        }
+        let value = to_js(request)?;
+        self.worker
+            .post_message_with_transfer(&value, &transfer)
+            .map_err(|e| JsError::new(&format!("cannot post to the worker: {e:?}")))
+    }
+}
+
+fn to_js(value: &impl Serialize) -> Result<JsValue, JsError> {
+    value
+        .serialize(&serde_wasm_bindgen::Serializer::json_compatible())
+        .map_err(|e| JsError::new(&format!("cannot build the message: {e}")))
+}

@@ -1,0 +1,103 @@
+//! The viewer's scene ([`egoexo_scene::SceneData`]) from an aligned session and its
+//! reconstruction(s): joints, devices, observer cameras and their gated rays in the world.
+
+use egoexo_core::aligned::{AlignedSession, AlignedTrajectory};
+use egoexo_core::camera::CameraCalibration;
+use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
+use egoexo_core::glam::{Vec2, Vec3};
+use egoexo_core::rays::canonicalize_keypoints;
+use egoexo_core::skeleton::NUM_JOINTS;
+use egoexo_infer::Reconstruction;
+use egoexo_scene::{DeviceTrack, ObserverScene, SceneData};
+
+fn flat_joints(joints: &[[Vec3; NUM_JOINTS]]) -> Vec<f32> {
+    joints.iter().flat_map(|f| f.iter().flat_map(|p| p.to_array())).collect()
+}
+
+fn device(name: &str, t: &AlignedTrajectory) -> DeviceTrack {
+    DeviceTrack {
+        name: name.to_string(),
+        positions: t.poses.iter().flat_map(|p| p.translation.to_array()).collect(),
+        valid: t.valid.clone(),
+    }
+}
+
+/// Half fields of view (radians, horizontal and vertical) of a camera, measured by
+/// unprojecting the middles of the image edges.
+pub fn half_fov(camera: &CameraCalibration) -> [f32; 2] {
+    let c = camera.projection.principal_point();
+    let angle = |px: Vec2| camera.projection.unproject(px).map_or(0.8, |d| d.z.clamp(-1.0, 1.0).acos());
+    let (w, h) = (camera.width as f32, camera.height as f32);
+    [
+        0.5 * (angle(Vec2::new(-0.5, c.y)) + angle(Vec2::new(w - 0.5, c.y))),
+        0.5 * (angle(Vec2::new(c.x, -0.5)) + angle(Vec2::new(c.x, h - 0.5))),
+    ]
+}
+
+/// Builds the scene; `ego_only` adds the comparison overlay.
+pub fn build_scene(aligned: &AlignedSession, recon: &Reconstruction, ego_only: Option<&Reconstruction>) -> SceneData {
+    let frames = aligned.timeline.frames.min(recon.joints.len());
+    let mut scene = SceneData::new(&aligned.name, aligned.timeline.fps, frames, recon.method.name());
+    scene.start_s = aligned.timeline.start_ns as f64 * 1e-9;
+    scene.joints = flat_joints(&recon.joints[..frames]);
+    scene.valid = recon.valid[..frames].to_vec();
+    scene.exo_evidence = recon.exo_evidence[..frames].to_vec();
+    scene.ego_only_joints = ego_only.filter(|e| e.joints.len() >= frames).map(|e| flat_joints(&e.joints[..frames]));
+    scene.ground_truth_joints = aligned.ground_truth.as_ref().filter(|gt| gt.poses.len() >= frames).map(|gt| {
+        let joints: Vec<_> =
+            gt.poses[..frames].iter().map(|p| aligned.skeleton.forward_kinematics(p).positions).collect();
+        flat_joints(&joints)
+    });
+    scene.devices.push(device("head", &aligned.head));
+    if let Some(l) = &aligned.left_wrist {
+        scene.devices.push(device("left_wrist", l));
+    }
+    if let Some(r) = &aligned.right_wrist {
+        scene.devices.push(device("right_wrist", r));
+    }
+    for d in &mut scene.devices {
+        d.positions.truncate(3 * frames);
+        d.valid.truncate(frames);
+    }
+    for (o, observer) in aligned.observers.iter().enumerate() {
+        let mut camera_poses = Vec::with_capacity(7 * frames);
+        let mut rays = vec![0.0f32; 4 * EXO_KEYPOINT_COUNT * frames];
+        for f in 0..frames {
+            let pose = &observer.head.poses[f];
+            let t_world_camera = observer.camera.t_world_camera(pose);
+            camera_poses.extend_from_slice(&t_world_camera.rotation.to_array());
+            camera_poses.extend_from_slice(&t_world_camera.translation.to_array());
+            if !observer.head.valid[f] {
+                continue;
+            }
+            let head = &aligned.head.poses[f];
+            let canonical = canonicalize_keypoints(&observer.keypoints[f], &observer.camera, pose, head);
+            for (k, ray) in canonical.iter().enumerate() {
+                if !ray.valid {
+                    continue;
+                }
+                let i = 4 * (f * EXO_KEYPOINT_COUNT + k);
+                rays[i..i + 3].copy_from_slice(&head.transform_point(ray.endpoint).to_array());
+                rays[i + 3] = recon.gates.get(o).and_then(|g| g.gates.get(f)).map_or(0.0, |g| g[k]);
+            }
+        }
+        scene.observers.push(ObserverScene {
+            id: observer.id.clone(),
+            camera_poses,
+            valid: observer.head.valid[..frames].to_vec(),
+            half_fov: half_fov(&observer.camera),
+            image_size: [observer.camera.width, observer.camera.height],
+            rays,
+        });
+    }
+    scene.floor_y = recon.joints[..frames]
+        .iter()
+        .zip(&recon.valid)
+        .filter(|(_, v)| **v)
+        .flat_map(|(j, _)| [7, 8, 10, 11].map(|k| j[k].y))
+        .fold(f32::INFINITY, f32::min);
+    if !scene.floor_y.is_finite() {
+        scene.floor_y = 0.0;
+    }
+    scene
+}

@@ -27,7 +27,8 @@ enum Command {
     Mocap(commands::mocap::Args),
     /// Simulate ego-exo sessions (or training shards) from motion-library subjects.
     Synth(commands::synth::Args),
-    /// Score reconstruction methods on simulated sessions with the paper's metrics.
+    /// Score reconstruction methods on simulated sessions of `--subjects` with the paper's metrics
+    /// (the nearest-neighbour baseline looks up poses among the library's other subjects).
     Eval(commands::eval::Args),
     /// Reconstruct the wearer's motion and write it as AMASS npz, BVH, glb, CSV or JSON.
     Reconstruct(commands::reconstruct::Args),

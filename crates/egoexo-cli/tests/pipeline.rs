@@ -7,7 +7,8 @@ mod common;
 
 use std::path::Path;
 
-use common::{cmu_dir, egoexo};
+use common::egoexo;
+use egoexo_test_support::cmu_dir;
 
 fn ok(args: &[&str]) -> String {
     let out = egoexo(args);

@@ -3,7 +3,6 @@
 #![cfg(not(target_arch = "wasm32"))]
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use egoexo_core::TrackingMode;
@@ -15,10 +14,7 @@ use egoexo_infer::{Engine, InferError, Method};
 use egoexo_mocap::library::{HISTOGRAM_BINS, LibraryClip, RetargetStats};
 use egoexo_mocap::{ClipInfo, MotionLibrary};
 use egoexo_synth::procedural::walking_circle;
-
-fn workspace_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
+use egoexo_test_support::{python, workspace_root};
 
 /// Three "subjects" walking for different durations.
 fn library() -> MotionLibrary {
@@ -184,18 +180,6 @@ print(W)
     std::fs::remove_dir_all(&dir).ok();
     assert!(out.status.success(), "numpy check failed:\n{}", String::from_utf8_lossy(&out.stderr));
     assert_eq!(String::from_utf8_lossy(&out.stdout).trim(), index.windows.to_string());
-}
-
-fn python() -> PathBuf {
-    if let Some(p) = std::env::var_os("EGOEXO_PYTHON") {
-        return p.into();
-    }
-    let venv = workspace_root().join("target/py/bin/python");
-    assert!(
-        venv.exists(),
-        "the Python test environment (target/py) is missing: run `cargo xtask setup` (or `cargo xtask test`)"
-    );
-    venv
 }
 
 #[test]

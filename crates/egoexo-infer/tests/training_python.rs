@@ -8,23 +8,9 @@
 //! and says so; it never passes silently.
 #![cfg(not(target_arch = "wasm32"))]
 
-use std::path::{Path, PathBuf};
 use std::process::Command;
 
-const SETUP_HINT: &str = "run `cargo xtask setup` (or `cargo xtask test`, which runs it) to install the test tools";
-
-fn workspace_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-fn python() -> PathBuf {
-    if let Some(p) = std::env::var_os("EGOEXO_PYTHON") {
-        return p.into();
-    }
-    let venv = workspace_root().join("target/py/bin/python");
-    assert!(venv.exists(), "the Python test environment (target/py) is missing: {SETUP_HINT}");
-    venv
-}
+use egoexo_test_support::{SETUP_HINT, python, workspace_root};
 
 #[test]
 fn training_pytest_suite_passes() {

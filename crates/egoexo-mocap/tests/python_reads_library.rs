@@ -1,7 +1,7 @@
 //! The library file is plain safetensors: Python with nothing but numpy reads its arrays and
 //! header, and gets the numbers Rust wrote. Uses the test venv's Python (`EGOEXO_PYTHON`,
-//! set by `cargo xtask test`, else `target/py`); skipped with a message when there is none or
-//! the CMU data is absent.
+//! set by `cargo xtask test`, else `target/py`; the test fails without one); skipped with a
+//! message when the CMU data is absent.
 
 mod common;
 
@@ -9,18 +9,7 @@ use std::path::PathBuf;
 use std::process::Command;
 
 use egoexo_mocap::{ImportOptions, MotionLibrary};
-
-fn python() -> Option<PathBuf> {
-    let candidate = std::env::var_os("EGOEXO_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../target/py/bin/python"));
-    if candidate.is_file() {
-        Some(candidate)
-    } else {
-        eprintln!("SKIPPED: no test Python at {} (run `cargo xtask test`)", candidate.display());
-        None
-    }
-}
+use egoexo_test_support::python;
 
 const READER: &str = r#"
 import json, struct, sys
@@ -51,7 +40,7 @@ print(json.dumps({
 #[test]
 fn numpy_reads_the_library() {
     let dir = require_cmu!();
-    let Some(python) = python() else { return };
+    let python = python();
     let catalog = common::catalog(&dir);
     let importer = common::subject(&dir, 2);
     let mut clips = Vec::new();

@@ -3,31 +3,17 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use egoexo_core::TrackingMode;
 use egoexo_dataset::eval::{EvalOptions, evaluate, format_table, nearest_neighbour_index};
 use egoexo_infer::{Engine, Method};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::models::{load_model_set, read_manifest};
-use super::tracking::TrackingArg;
+use super::simulation::SimulationArgs;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The motion library (`egoexo mocap import`).
-    #[arg(long)]
-    pub lib: PathBuf,
-    /// CMU subjects to evaluate on, comma-separated. The nearest-neighbour baseline looks up
-    /// poses among all other subjects of the library.
-    #[arg(long, value_delimiter = ',', required = true)]
-    pub subjects: Vec<u32>,
-    /// Observers per simulated session.
-    #[arg(long, default_value_t = 1)]
-    pub observers: usize,
-    /// Wearer tracking: 1 or 3.
-    #[arg(long, value_enum, default_value = "3")]
-    pub tracking: TrackingArg,
-    #[arg(long, default_value_t = 7)]
-    pub seed: u64,
+    #[command(flatten)]
+    pub simulation: SimulationArgs,
     /// Models folder: adds the `ego-only`, `ego-exo` and `ego-exo-ungated` rows.
     #[arg(long)]
     pub models: Option<PathBuf>,
@@ -37,15 +23,15 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let library =
-        egoexo_mocap::fs::open_library(&args.lib).with_context(|| format!("opening {}", args.lib.display()))?;
-    let tracking = TrackingMode::from(args.tracking);
-    let training: Vec<u32> = library.subjects().into_iter().filter(|s| !args.subjects.contains(s)).collect();
+    let sim = &args.simulation;
+    let library = sim.open_library()?;
+    let tracking = sim.tracking_mode();
+    let training: Vec<u32> = library.subjects().into_iter().filter(|s| !sim.subjects.contains(s)).collect();
     if training.is_empty() {
         bail!("every subject of the library is being evaluated; the nearest-neighbour baseline needs other subjects");
     }
     let mut engine = Engine::new()
-        .with_nearest_neighbour(tracking, nearest_neighbour_index(&library, &training, tracking, args.seed, 2)?);
+        .with_nearest_neighbour(tracking, nearest_neighbour_index(&library, &training, tracking, sim.seed, 2)?);
     let mut methods = vec![Method::RestPose, Method::NearestNeighbour];
     if let Some(dir) = &args.models {
         let manifest = read_manifest(dir)?;
@@ -55,7 +41,7 @@ pub fn run(args: Args) -> Result<()> {
         methods.extend([Method::EgoOnly, Method::EgoExo, Method::EgoExoUngated]);
     }
     let options =
-        EvalOptions { subjects: args.subjects.clone(), observers: args.observers, tracking, seed: args.seed, methods };
+        EvalOptions { subjects: sim.subjects.clone(), observers: sim.observers, tracking, seed: sim.seed, methods };
     let bar = if args.json { ProgressBar::hidden() } else { ProgressBar::new(0) };
     bar.set_style(
         ProgressStyle::with_template("eval {bar:40} {pos}/{len} clips [{elapsed_precise}]")

@@ -7,5 +7,6 @@ pub mod mocap;
 pub mod models;
 pub mod reconstruct;
 pub mod session_input;
+pub mod simulation;
 pub mod synth;
 pub mod tracking;

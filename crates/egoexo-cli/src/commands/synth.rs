@@ -3,7 +3,6 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use egoexo_core::TrackingMode;
 use egoexo_core::ego_features::EGO_FEATURE_DIM;
 use egoexo_dataset::shards::{EgoNetForShards, ShardOptions, ShardStage, write_shards};
 use egoexo_infer::manifest::sha256_hex;
@@ -13,7 +12,7 @@ use egoexo_session::format::save_egoexo;
 use egoexo_synth::{SynthConfig, simulate};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::tracking::TrackingArg;
+use super::simulation::SimulationArgs;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum StageArg {
@@ -25,20 +24,8 @@ pub enum StageArg {
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The motion library (`egoexo mocap import`).
-    #[arg(long)]
-    pub lib: PathBuf,
-    /// CMU subject numbers to simulate, comma-separated (e.g. `2,5`).
-    #[arg(long, value_delimiter = ',', required = true)]
-    pub subjects: Vec<u32>,
-    /// Observers per session (for shards: the most per session, and the networks' slots).
-    #[arg(long, default_value_t = 1)]
-    pub observers: usize,
-    /// Wearer tracking: 1 (glasses) or 3 (glasses + wrists).
-    #[arg(long, value_enum, default_value = "3")]
-    pub tracking: TrackingArg,
-    #[arg(long, default_value_t = 7)]
-    pub seed: u64,
+    #[command(flatten)]
+    pub simulation: SimulationArgs,
     /// Output folder.
     #[arg(short = 'o', long)]
     pub out: PathBuf,
@@ -94,11 +81,11 @@ fn parse_fold(text: &str) -> Result<Fold, String> {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let library =
-        egoexo_mocap::fs::open_library(&args.lib).with_context(|| format!("opening {}", args.lib.display()))?;
-    let mut clips = library.clips_of_subjects(&args.subjects);
+    let sim = &args.simulation;
+    let library = sim.open_library()?;
+    let mut clips = library.clips_of_subjects(&sim.subjects);
     if clips.is_empty() {
-        bail!("{} has no clips of subjects {:?} (it has {:?})", args.lib.display(), args.subjects, library.subjects());
+        bail!("{} has no clips of subjects {:?} (it has {:?})", sim.lib.display(), sim.subjects, library.subjects());
     }
     if let Some(fold) = args.fold {
         clips.retain(|&c| fold.contains(c));
@@ -107,10 +94,10 @@ pub fn run(args: Args) -> Result<()> {
         clips.retain(|&c| !fold.contains(c));
     }
     if clips.is_empty() {
-        bail!("no clips of subjects {:?} are left after the fold selection", args.subjects);
+        bail!("no clips of subjects {:?} are left after the fold selection", sim.subjects);
     }
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-    let tracking = TrackingMode::from(args.tracking);
+    let tracking = sim.tracking_mode();
     let bar = ProgressBar::new(clips.len() as u64).with_style(
         ProgressStyle::with_template("{msg} {bar:40} {pos}/{len} clips [{elapsed_precise}]")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
@@ -133,11 +120,11 @@ pub fn run(args: Args) -> Result<()> {
         };
         let options = ShardOptions {
             tracking,
-            max_observers: args.observers.max(1),
-            observers: (0, args.observers.max(1)),
+            max_observers: sim.observers.max(1),
+            observers: (0, sim.observers.max(1)),
             simulations_per_clip: args.simulations.max(1),
             stride: args.stride.max(1),
-            seed: args.seed,
+            seed: sim.seed,
             mirror: !args.no_mirror,
             ..ShardOptions::default()
         };
@@ -168,12 +155,12 @@ pub fn run(args: Args) -> Result<()> {
     }
 
     bar.set_message("sessions");
-    let config = SynthConfig { tracking, observers: args.observers, ..SynthConfig::default() };
+    let config = SynthConfig { tracking, observers: sim.observers, ..SynthConfig::default() };
     for (i, &clip) in clips.iter().enumerate() {
         let info = &library.clips()[clip];
         let motion = library.motion(clip)?;
         let name = info.label().replace('/', "-");
-        let sim = simulate(&motion, &name, &config, egoexo_dataset::shards::mix(args.seed, clip as u64, 0x5E55))?;
+        let sim = simulate(&motion, &name, &config, egoexo_dataset::shards::mix(sim.seed, clip as u64, 0x5E55))?;
         let path = args.out.join(if args.folders { name.clone() } else { format!("{name}.egoexo") });
         save_egoexo(&sim.session, &path, args.folders).with_context(|| format!("writing {}", path.display()))?;
         bar.set_position(i as u64 + 1);

@@ -2,26 +2,9 @@
 
 #![allow(dead_code)]
 
-use std::path::PathBuf;
-
 use egoexo_mocap::fs::{read_catalog, read_text};
 use egoexo_mocap::{Catalog, SubjectImporter};
-
-/// The CMU subset: `$EGOEXO_CMU_DIR`, else `shared/data/cmu` beside the repository.
-pub fn cmu_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("EGOEXO_CMU_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/cmu"));
-    if dir.join("CMU_data.csv").is_file() {
-        Some(dir)
-    } else {
-        eprintln!(
-            "SKIPPED: the CMU data is not at {} (set EGOEXO_CMU_DIR to the folder with CMU_data.csv)",
-            dir.display()
-        );
-        None
-    }
-}
+pub use egoexo_test_support::cmu_dir;
 
 /// Returns from the test (skipping it, with a message) when the data is absent.
 #[macro_export]

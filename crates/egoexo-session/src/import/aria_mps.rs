@@ -205,21 +205,87 @@ pub(crate) fn load_device(
     Ok(LoadedDevice { trajectory: Trajectory { timestamps_ns, poses }, camera, synced })
 }
 
-/// Errors unless every device is synced or none is.
-pub(crate) fn check_sync(devices: &[(String, bool)]) -> Result<(), ImportError> {
-    let (synced, unsynced): (Vec<_>, Vec<_>) = devices.iter().partition(|(_, s)| *s);
-    if let (Some((with, _)), Some((without, _))) = (synced.first(), unsynced.first()) {
-        return Err(ImportError::new(
-            without.clone(),
-            Location::File,
-            ImportErrorKind::MixedClocks {
-                detail: format!(
-                    "`{with}` has a {TIME_SYNC_FILE} (common clock) but `{without}` has none (device clock); give every device folder one, or none"
-                ),
-            },
-        ));
+/// Loads the device folders of one multi-device recording (the Aria multi-device layout,
+/// Nymeria) and checks at the end that either all or none of them were on a common clock.
+pub(crate) struct DeviceLoader<'w> {
+    clock: Clock,
+    warnings: &'w mut Vec<ImportWarning>,
+    /// `(folder, synced)` per loaded device, in load order.
+    synced: Vec<(String, bool)>,
+}
+
+impl<'w> DeviceLoader<'w> {
+    pub(crate) fn new(clock: Clock, warnings: &'w mut Vec<ImportWarning>) -> Self {
+        Self { clock, warnings, synced: Vec::new() }
     }
-    Ok(())
+
+    /// Loads the device folder `dir` of `root`.
+    pub(crate) fn device(&mut self, root: &FileTree, dir: &str, role: DeviceRole) -> Result<LoadedDevice, ImportError> {
+        let device = load_device(&root.view(dir), role, self.clock, self.warnings)?;
+        self.synced.push((format!("{dir}/"), device.synced));
+        Ok(device)
+    }
+
+    /// The wearer's glasses in `head_dir` and, where those folders exist, the wrist devices in
+    /// `wrist_dirs` (left, right).
+    pub(crate) fn wearer(
+        &mut self,
+        root: &FileTree,
+        head_dir: &str,
+        wrist_dirs: [&str; 2],
+    ) -> Result<(LoadedDevice, [Option<Trajectory>; 2]), ImportError> {
+        let head = self.device(root, head_dir, DeviceRole::Head)?;
+        let mut wrists = [None, None];
+        for (slot, dir) in wrists.iter_mut().zip(wrist_dirs) {
+            if root.contains_dir(dir) {
+                *slot = Some(self.device(root, dir, DeviceRole::Wrist)?.trajectory);
+            }
+        }
+        Ok((head, wrists))
+    }
+
+    /// The observer `id` in the device folder `dir` of `root`: its trajectory, its RGB camera
+    /// and its keypoints (`keypoints.jsonl` or `keypoints.json`, when present).
+    pub(crate) fn observer(
+        &mut self,
+        root: &FileTree,
+        dir: &str,
+        id: &str,
+        options: &ImportOptions,
+    ) -> Result<Observer, ImportError> {
+        let device = self.device(root, dir, DeviceRole::Observer)?;
+        let folder = root.view(dir);
+        let camera = device.camera.ok_or_else(|| {
+            ImportError::missing_file(folder.display_path(CALIBRATION_FILE), "the observer's RGB camera calibration")
+        })?;
+        let start = device.trajectory.timestamps_ns.first().copied().unwrap_or_default();
+        let keypoints = read_observer_keypoints(&folder, id, options, start, self.warnings)?;
+        Ok(Observer {
+            id: id.to_owned(),
+            head: device.trajectory,
+            camera,
+            keypoints,
+            video: None,
+            context_features: None,
+        })
+    }
+
+    /// Errors unless every device was synced or none was; returns whether they were.
+    pub(crate) fn finish(self) -> Result<bool, ImportError> {
+        let (synced, unsynced): (Vec<_>, Vec<_>) = self.synced.iter().partition(|(_, s)| *s);
+        if let (Some((with, _)), Some((without, _))) = (synced.first(), unsynced.first()) {
+            return Err(ImportError::new(
+                without.clone(),
+                Location::File,
+                ImportErrorKind::MixedClocks {
+                    detail: format!(
+                        "`{with}` has a {TIME_SYNC_FILE} (common clock) but `{without}` has none (device clock); give every device folder one, or none"
+                    ),
+                },
+            ));
+        }
+        Ok(unsynced.is_empty() && !synced.is_empty())
+    }
 }
 
 /// Imports one device folder: the wearer's glasses alone.
@@ -255,45 +321,22 @@ pub fn import_multi_device(
     options: &ImportOptions,
 ) -> Result<(Session, Vec<ImportWarning>), ImportError> {
     let mut warnings = Vec::new();
-    let mut sync = Vec::new();
-    let head = load_device(&root.view("wearer"), DeviceRole::Head, options.clock, &mut warnings)?;
-    sync.push(("wearer/".to_owned(), head.synced));
-    let mut wrists = [None, None];
-    for (slot, dir) in wrists.iter_mut().zip(["left_wrist", "right_wrist"]) {
-        if root.contains_dir(dir) {
-            let device = load_device(&root.view(dir), DeviceRole::Wrist, options.clock, &mut warnings)?;
-            sync.push((format!("{dir}/"), device.synced));
-            *slot = Some(device.trajectory);
-        }
-    }
+    let mut devices = DeviceLoader::new(options.clock, &mut warnings);
+    let (head, wrists) = devices.wearer(root, "wearer", ["left_wrist", "right_wrist"])?;
     let mut observers = Vec::new();
     for id in root.subdirs("observers") {
-        let dir = root.view(&format!("observers/{id}"));
+        let dir = format!("observers/{id}");
         if !crate::validate::is_valid_observer_id(&id) {
             return Err(ImportError::invalid(
-                dir.display_path(""),
+                root.view(&dir).display_path(""),
                 Location::File,
                 "an observer folder name of 1–64 characters from A–Z, a–z, 0–9, `.`, `_`, `-`",
                 format!("`{id}`"),
             ));
         }
-        let device = load_device(&dir, DeviceRole::Observer, options.clock, &mut warnings)?;
-        sync.push((format!("observers/{id}/"), device.synced));
-        let camera = device.camera.ok_or_else(|| {
-            ImportError::missing_file(dir.display_path(CALIBRATION_FILE), "the observer's RGB camera calibration")
-        })?;
-        let start = device.trajectory.timestamps_ns.first().copied().unwrap_or_default();
-        let keypoints = read_observer_keypoints(&dir, &id, options, start, &mut warnings)?;
-        observers.push(Observer {
-            id,
-            head: device.trajectory,
-            camera,
-            keypoints,
-            video: None,
-            context_features: None,
-        });
+        observers.push(devices.observer(root, &dir, &id, options)?);
     }
-    check_sync(&sync)?;
+    devices.finish()?;
     if observers.is_empty() {
         warnings.push(ImportWarning {
             file: root.display_path("observers/"),

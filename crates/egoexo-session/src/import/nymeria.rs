@@ -29,10 +29,10 @@ use egoexo_core::rotation::quat_from_axis_angle;
 use egoexo_core::skeleton::{NUM_BODY_JOINTS, SmplPose, SmplSkeleton};
 
 use super::ImportOptions;
-use super::aria_mps::{DeviceRole, check_sync, load_device, read_observer_keypoints};
+use super::aria_mps::DeviceLoader;
 use crate::aria::session_smpl_pose_from_aria;
 use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
-use crate::model::{GroundTruth, Observer, Session, SubjectInfo, Wearer};
+use crate::model::{GroundTruth, Session, SubjectInfo, Wearer};
 use crate::npz::{NpyArray, Npz};
 use crate::vfs::FileTree;
 
@@ -52,46 +52,20 @@ pub fn import_nymeria(
     options: &ImportOptions,
 ) -> Result<(Session, Vec<ImportWarning>), ImportError> {
     let mut warnings = Vec::new();
-    let mut sync = Vec::new();
-    let head = load_device(&root.view("recording_head"), DeviceRole::Head, options.clock, &mut warnings)?;
-    sync.push(("recording_head/".to_owned(), head.synced));
-    let mut wrists = [None, None];
-    for (slot, dir) in wrists.iter_mut().zip(["recording_lwrist", "recording_rwrist"]) {
-        if root.contains_dir(dir) {
-            let device = load_device(&root.view(dir), DeviceRole::Wrist, options.clock, &mut warnings)?;
-            sync.push((format!("{dir}/"), device.synced));
-            *slot = Some(device.trajectory);
-        }
-    }
+    let mut devices = DeviceLoader::new(options.clock, &mut warnings);
+    let (head, wrists) = devices.wearer(root, "recording_head", ["recording_lwrist", "recording_rwrist"])?;
     let mut observers = Vec::new();
-    if root.contains_dir("recording_observer") {
-        let dir = root.view("recording_observer");
-        let device = load_device(&dir, DeviceRole::Observer, options.clock, &mut warnings)?;
-        sync.push(("recording_observer/".to_owned(), device.synced));
-        let camera = device.camera.ok_or_else(|| {
-            ImportError::missing_file(
-                dir.display_path("mps/slam/online_calibration.jsonl"),
-                "the observer's RGB calibration",
-            )
-        })?;
-        let start = device.trajectory.timestamps_ns.first().copied().unwrap_or_default();
-        let keypoints = read_observer_keypoints(&dir, OBSERVER_ID, options, start, &mut warnings)?;
-        observers.push(Observer {
-            id: OBSERVER_ID.into(),
-            head: device.trajectory,
-            camera,
-            keypoints,
-            video: None,
-            context_features: None,
-        });
-    } else {
+    let observer_missing = !root.contains_dir("recording_observer");
+    if !observer_missing {
+        observers.push(devices.observer(root, "recording_observer", OBSERVER_ID, options)?);
+    }
+    let synced = devices.finish()?;
+    if observer_missing {
         warnings.push(ImportWarning {
             file: root.display_path("recording_observer/"),
             message: "missing: a session without observers".into(),
         });
     }
-    check_sync(&sync)?;
-    let synced = sync.first().is_some_and(|(_, s)| *s);
 
     let mut subject = SubjectInfo::default();
     let ground_truth = if root.contains(SMPL_FILE) {

@@ -1,0 +1,71 @@
+//! What the workspace's integration tests share (a dev-dependency only): where the repository,
+//! the test tools and the CMU data are.
+//!
+//! The tools come from `cargo xtask setup` (run by `cargo xtask test`): the venv `target/py`
+//! from `tests/requirements.txt` and `tests/node_modules` from `tests/package-lock.json`,
+//! passed in as `EGOEXO_PYTHON` and `EGOEXO_NODE_MODULES`. A test that needs one and finds
+//! none fails and says how to install it; it never passes silently. The CMU data is the
+//! exception: tests of it are skipped, with a message, where `shared/data/cmu` is absent.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// What a failing test says about the missing tools.
+pub const SETUP_HINT: &str = "run `cargo xtask setup` (or `cargo xtask test`, which runs it) to install the test tools";
+
+/// The repository root.
+pub fn workspace_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// The test venv's Python: `EGOEXO_PYTHON`, else `target/py` if `cargo xtask setup` made it.
+/// Fails the test when there is none.
+pub fn python() -> PathBuf {
+    if let Some(p) = std::env::var_os("EGOEXO_PYTHON") {
+        return p.into();
+    }
+    let venv = workspace_root().join("target/py/bin/python");
+    assert!(venv.exists(), "the Python test environment (target/py) is missing: {SETUP_HINT}");
+    venv
+}
+
+/// `tests/node_modules` (`EGOEXO_NODE_MODULES`, else the default location), which must hold
+/// the npm package `package`. Fails the test otherwise.
+pub fn node_modules(package: &str) -> PathBuf {
+    let dir = std::env::var_os("EGOEXO_NODE_MODULES")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| workspace_root().join("tests/node_modules"));
+    assert!(dir.join(package).exists(), "{} has no {package}: {SETUP_HINT}", dir.display());
+    dir
+}
+
+/// Runs a tool and returns its standard output; fails the test with the tool's standard
+/// error when it cannot start or exits unsuccessfully.
+pub fn run_tool(cmd: &mut Command) -> String {
+    let out = cmd.output().unwrap_or_else(|e| panic!("cannot run {cmd:?}: {e}; {SETUP_HINT}"));
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed ({}):\n{}\n{}\n(if a module or package is missing: {SETUP_HINT})",
+        out.status,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).expect("UTF-8 output")
+}
+
+/// The CMU ASF/AMC folder with `CMU_data.csv` (`EGOEXO_CMU_DIR`, else `shared/data/cmu`
+/// beside the repository), or `None` with a SKIPPED message when it is absent.
+pub fn cmu_dir() -> Option<PathBuf> {
+    let dir = std::env::var_os("EGOEXO_CMU_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| workspace_root().join("../shared/data/cmu"));
+    if dir.join("CMU_data.csv").is_file() {
+        Some(dir)
+    } else {
+        eprintln!(
+            "SKIPPED: the CMU data is not at {} (set EGOEXO_CMU_DIR to the folder with CMU_data.csv)",
+            dir.display()
+        );
+        None
+    }
+}

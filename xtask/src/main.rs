@@ -12,6 +12,8 @@
 
 mod cmd;
 mod e2e;
+#[cfg(test)]
+mod layers;
 mod serve;
 mod test;
 mod tools;

@@ -3,6 +3,9 @@
 //! - [`worker`] — the page ↔ Web Worker messages (`docs/worker-protocol.md`): requests the
 //!   page sends, events the worker answers with, error kinds the page reacts to, and the
 //!   summaries it shows. Version [`worker::WORKER_PROTOCOL_VERSION`].
+//! - [`share`] — the share API between the page (or the CLI) and the server
+//!   (`docs/share-format.md`): share ids, expiries, answers and error kinds. Version
+//!   [`share::SHARE_API_VERSION`].
 //!
 //! Every message is plain serde data. Byte buffers are a type parameter `B`: natively (and in
 //! tests) [`serde_bytes::ByteBuf`]; in the browser [`JsBytes`], the JS `Uint8Array` itself, so
@@ -12,6 +15,7 @@
 
 #[cfg(target_arch = "wasm32")]
 pub mod js;
+pub mod share;
 pub mod worker;
 
 pub use serde_bytes::ByteBuf;

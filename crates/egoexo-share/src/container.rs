@@ -1,0 +1,121 @@
+//! The share container, version [`SHARE_FORMAT_VERSION`]: a zip (deflate, fixed timestamps)
+//! of
+//!
+//! | entry | content |
+//! |---|---|
+//! | `share.json` | [`ShareManifest`]: format, version, name, who made it, the reconstruction summary, the session summary |
+//! | `scene.json` | the viewer's `SceneData` (JSON), exactly as the worker built it |
+//! | `motion.json` | the reconstructed `SmplMotion` (JSON: fps, start time, skeleton, betas, poses) for the exports |
+//! | `session.egoexo` | optional: the recording as a `.egoexo` session, so the reconstruction can be re-run |
+//!
+//! Reading checks every entry against size limits before decompressing it (a share is
+//! untrusted input: the key is in a link anybody may have changed).
+
+use std::collections::BTreeMap;
+
+use egoexo_core::SmplMotion;
+use egoexo_protocol::worker::{ReconstructionSummary, SessionSummary};
+use egoexo_session::{FileTree, Limits};
+use serde::{Deserialize, Serialize};
+
+use crate::ShareError;
+
+/// The container's `format` field.
+pub const SHARE_FORMAT: &str = "egoexo-share";
+/// The container's version.
+pub const SHARE_FORMAT_VERSION: u32 = 1;
+
+/// Entry names.
+pub const MANIFEST_FILE: &str = "share.json";
+pub const SCENE_FILE: &str = "scene.json";
+pub const MOTION_FILE: &str = "motion.json";
+pub const SESSION_FILE: &str = "session.egoexo";
+
+/// Most bytes one entry may decompress to (the share limit is on the compressed whole).
+pub const MAX_ENTRY_BYTES: u64 = 1 << 30;
+
+/// `share.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ShareManifest {
+    /// Always [`SHARE_FORMAT`].
+    pub format: String,
+    /// [`SHARE_FORMAT_VERSION`] when written.
+    pub version: u32,
+    /// The session's name.
+    pub name: String,
+    /// `egoexo <version>` (page or CLI).
+    pub created_by: String,
+    /// The reconstruction.
+    pub summary: ReconstructionSummary,
+    /// The session it was made from.
+    pub session: SessionSummary,
+    /// Whether `session.egoexo` is included.
+    pub includes_recording: bool,
+}
+
+/// Everything in a share.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShareContents {
+    pub manifest: ShareManifest,
+    /// `SceneData` JSON.
+    pub scene_json: Vec<u8>,
+    /// The reconstructed motion (ego-exo).
+    pub motion: SmplMotion,
+    /// The recording as `.egoexo` zip bytes, when included.
+    pub session_egoexo: Option<Vec<u8>>,
+}
+
+impl ShareManifest {
+    /// A manifest of the current version.
+    pub fn new(name: &str, created_by: &str, summary: ReconstructionSummary, session: SessionSummary) -> Self {
+        ShareManifest {
+            format: SHARE_FORMAT.into(),
+            version: SHARE_FORMAT_VERSION,
+            name: name.into(),
+            created_by: created_by.into(),
+            summary,
+            session,
+            includes_recording: false,
+        }
+    }
+}
+
+/// Packs a share into container bytes (not yet sealed).
+pub fn pack(contents: &ShareContents) -> Result<Vec<u8>, ShareError> {
+    let json = |what: &str, e: serde_json::Error| ShareError::Container(format!("cannot write {what}: {e}"));
+    let mut manifest = contents.manifest.clone();
+    manifest.includes_recording = contents.session_egoexo.is_some();
+    let mut files = BTreeMap::new();
+    files.insert(MANIFEST_FILE.to_string(), serde_json::to_vec_pretty(&manifest).map_err(|e| json(MANIFEST_FILE, e))?);
+    files.insert(SCENE_FILE.to_string(), contents.scene_json.clone());
+    files.insert(MOTION_FILE.to_string(), serde_json::to_vec(&contents.motion).map_err(|e| json(MOTION_FILE, e))?);
+    if let Some(session) = &contents.session_egoexo {
+        files.insert(SESSION_FILE.to_string(), session.clone());
+    }
+    egoexo_motion_io::npz::write_zip(&files).map_err(|e| ShareError::Container(format!("cannot write the zip: {e}")))
+}
+
+/// Reads container bytes (already opened from their envelope).
+pub fn unpack(bytes: Vec<u8>) -> Result<ShareContents, ShareError> {
+    let limits = Limits { max_entries: 16, max_file_bytes: MAX_ENTRY_BYTES };
+    let tree = FileTree::from_zip("share", bytes, limits).map_err(|e| ShareError::Container(e.to_string()))?;
+    let read = |name: &str| tree.read(name).map(|b| b.into_owned()).map_err(|e| ShareError::Container(e.to_string()));
+    let manifest: ShareManifest = serde_json::from_slice(&read(MANIFEST_FILE)?)
+        .map_err(|e| ShareError::Container(format!("{MANIFEST_FILE}: {e}")))?;
+    if manifest.format != SHARE_FORMAT {
+        return Err(ShareError::Container(format!(
+            "{MANIFEST_FILE}: format is `{}`, expected `{SHARE_FORMAT}`",
+            manifest.format
+        )));
+    }
+    if manifest.version != SHARE_FORMAT_VERSION {
+        return Err(ShareError::ContainerVersion { found: manifest.version, supported: SHARE_FORMAT_VERSION });
+    }
+    let motion: SmplMotion = serde_json::from_slice(&read(MOTION_FILE)?)
+        .map_err(|e| ShareError::Container(format!("{MOTION_FILE}: {e}")))?;
+    let motion = SmplMotion::new(motion.fps, motion.start_ns, motion.skeleton, motion.betas, motion.poses)
+        .map_err(|e| ShareError::Container(format!("{MOTION_FILE}: {e}")))?;
+    let scene_json = read(SCENE_FILE)?;
+    let session_egoexo = if manifest.includes_recording { Some(read(SESSION_FILE)?) } else { None };
+    Ok(ShareContents { manifest, scene_json, motion, session_egoexo })
+}

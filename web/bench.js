@@ -40,9 +40,10 @@ const median = (xs) => {
 };
 
 async function main() {
-  const list = await (await fetch('samples/samples.json')).json();
+  const samples = new URL('samples/samples.json', import.meta.url);
+  const list = await (await fetch(samples)).json();
   const sample = list.samples[0];
-  const bytes = new Uint8Array(await (await fetch(`samples/${sample.file}`)).arrayBuffer());
+  const bytes = new Uint8Array(await (await fetch(new URL(sample.file, samples))).arrayBuffer());
   const { summary } = await request((c) => c.open_archive(sample.file, bytes));
   const frames = summary.frames;
   say(`${sample.file}: ${frames} frames, ${summary.observers.length} observers, ${summary.tracking_points}-point tracking`);

@@ -3,11 +3,13 @@
 // does every message to and from the worker: `WorkerClient` builds the requests and checks
 // the events (docs/worker-protocol.md); this file reacts to them.
 
-import initViewer, { Viewer, WorkerClient } from './pkg/egoexo_viewer.js';
+import initViewer, { Viewer, WorkerClient, fragment_with_time, parse_fragment, share_fragment } from './pkg/egoexo_viewer.js';
+import { deleteShare, fetchShare, forgetShare, loadShareConfig, megabytes, rememberShare, savedShares, uploadShare } from './share.js';
 
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
-const SAMPLES_URL = new URL('samples/samples.json', location.href);
+// Assets (samples among them) live beside this script, under the build's versioned folder.
+const SAMPLES_URL = new URL('samples/samples.json', import.meta.url);
 
 const state = {
   viewer: null,
@@ -18,6 +20,12 @@ const state = {
   scene: null, // the last scene JSON (Uint8Array)
   summary: null, // the last reconstruction summary
   reconstructStarted: 0, // performance.now() when the reconstruction was asked for
+  Viewer, // the viewer's class (off-screen renders in the tests)
+  share: { apiBase: location.origin, server: null }, // the share API and its limits
+  linkable: false, // whether the address can say what is shown (sample, ?url=, share)
+  pendingTime: null, // where a link asked to open: {start, end}
+  inputBytes: 0, // size of the opened file (does the recording fit in a share?)
+  openedShare: null, // {includes_recording} of a share being shown
 };
 // For the end-to-end tests and the curious: the live objects.
 window.egoexo = state;
@@ -128,7 +136,16 @@ function onWorkerEvent(event) {
       state.client.reconstruct(true);
       break;
     case 'reconstructed':
-      showScene(event.scene, event.summary, performance.now() - state.reconstructStarted);
+      state.openedShare = null;
+      showScene(event.scene, event.summary, `in ${((performance.now() - state.reconstructStarted) / 1000).toFixed(1)} s`);
+      break;
+    case 'share-sealed':
+      onShareSealed(event);
+      break;
+    case 'share-opened':
+      state.openedShare = { includes_recording: event.includes_recording };
+      showSession(event.session);
+      showScene(event.scene, event.summary, `(shared, made by ${event.created_by})`);
       break;
     case 'exported':
       download(event.file.bytes, event.file.file_name, event.file.mime_type);
@@ -136,7 +153,13 @@ function onWorkerEvent(event) {
       setState('ready');
       break;
     case 'error':
-      if (event.kind === 'models-missing') {
+      if (event.stage === 'share' && $('share-dialog').open) {
+        $('share-status').textContent = `Could not make the share: ${event.message}`;
+        setBusy(false);
+        setState('ready');
+      } else if (event.kind === 'share-invalid') {
+        fail('Could not open the share', event.message);
+      } else if (event.kind === 'models-missing') {
         fail(STAGE_TITLES.models, `${event.message}\nThis copy of the app was built without models/.`);
       } else {
         fail(STAGE_TITLES[event.stage] ?? 'Error', event.message);
@@ -164,14 +187,28 @@ function startJob(open) {
   open(state.client);
 }
 
+// Says in the address what is shown (`#sample`, `?url=`, a share), or clears it for a local
+// file, so that a copied address opens the same thing.
+function setSource(fragment, linkable) {
+  state.linkable = linkable;
+  const url = new URL(location.href);
+  if (!linkable) url.searchParams.delete('url');
+  url.hash = fragment;
+  history.replaceState(null, '', url);
+}
+
 async function openArchive(file) {
   const bytes = new Uint8Array(await file.arrayBuffer());
+  setSource('', false);
+  state.inputBytes = bytes.length;
   startJob((client) => client.open_archive(file.name, bytes));
 }
 
 async function openFolder(name, entries) {
   // entries: [{path, file}] with paths relative to the dropped folder's parent.
   const contents = await Promise.all(entries.map(async (e) => new Uint8Array(await e.file.arrayBuffer())));
+  setSource('', false);
+  state.inputBytes = contents.reduce((n, c) => n + c.length, 0);
   startJob((client) => client.open_files(name, entries.map((e) => e.path), contents));
 }
 
@@ -181,10 +218,55 @@ async function openSample() {
     const list = await fetchOk(SAMPLES_URL).then((r) => r.json());
     const sample = list.samples[0];
     const bytes = new Uint8Array(await fetchOk(new URL(sample.file, SAMPLES_URL)).then((r) => r.arrayBuffer()));
+    setSource(fragment_with_time(location.hash.startsWith('#sample') ? location.hash : '#sample', state.pendingTime?.start, state.pendingTime?.end), true);
+    state.inputBytes = bytes.length;
     startJob((client) => client.open_archive(sample.file.split('/').pop(), bytes));
   } catch (error) {
     fail('Could not load the sample', error.message);
   }
+}
+
+// `?url=<https URL of a .egoexo or zip>`: a session hosted anywhere that allows CORS.
+async function openUrl(address) {
+  let url;
+  try {
+    url = new URL(address, location.href);
+  } catch {
+    fail('Could not open the URL', `\`${address}\` is not a URL.`);
+    return;
+  }
+  let bytes;
+  try {
+    const response = await fetch(url);
+    if (!response.ok) throw new Error(`HTTP ${response.status} ${response.statusText}`);
+    bytes = new Uint8Array(await response.arrayBuffer());
+  } catch (error) {
+    fail('Could not open the URL', `${url.href}: ${error.message}\nThe server may not let other sites read the file ` +
+      '(it must send Access-Control-Allow-Origin), or it cannot be reached.');
+    return;
+  }
+  state.linkable = true;
+  state.inputBytes = bytes.length;
+  const name = decodeURIComponent(url.pathname.split('/').pop() || 'session.egoexo');
+  startJob((client) => client.open_archive(name, bytes));
+}
+
+// `#share=<id>.<key>`: fetch the sealed share and open it in the worker.
+async function openShareLink(share) {
+  clearError();
+  setBusy(true);
+  setState('busy');
+  showProgress('fetching the share…', null);
+  let sealed;
+  try {
+    sealed = await fetchShare(state.share.apiBase, share.id);
+  } catch (error) {
+    fail(error.kind === 'expired' ? 'This share has expired' : error.kind === 'not-found' ? 'No such share' : 'Could not fetch the share', error.message);
+    return;
+  }
+  state.linkable = true;
+  state.inputBytes = 0;
+  state.client.open_share(sealed, share.key);
 }
 
 async function fetchOk(url) {
@@ -257,7 +339,7 @@ function showSession(s) {
   $('result-facts').replaceChildren();
 }
 
-function showScene(scene, summary, elapsedMs) {
+function showScene(scene, summary, how) {
   const viewer = state.viewer;
   try {
     if (!viewer) throw new Error('the 3D view could not start (see above)');
@@ -270,7 +352,7 @@ function showScene(scene, summary, elapsedMs) {
   }
   const rows = [
     ['method', `${summary.method}, ${summary.tracking_points}-point`],
-    ['reconstructed', `${summary.valid_frames} of ${summary.frames} frames in ${(elapsedMs / 1000).toFixed(1)} s`],
+    ['reconstructed', `${summary.valid_frames} of ${summary.frames} frames ${how}`],
     ['exo evidence', `${summary.exo_evidence_frames} frames`],
   ];
   if (summary.accuracy) {
@@ -285,8 +367,25 @@ function showScene(scene, summary, elapsedMs) {
   $('frame-count').textContent = `${frames} frames`;
   $('frame-count').hidden = false;
   applyToggles();
-  viewer.seek(0);
-  viewer.play();
+  $('rerun-button').hidden = !(state.openedShare?.includes_recording);
+  viewer.clear_loop();
+  const time = state.pendingTime;
+  state.pendingTime = null;
+  if (time) {
+    // A link to a moment: show that frame (paused), or play its range in a loop.
+    const fps = viewer.fps();
+    const start = Math.min(frames - 1, Math.round(time.start * fps));
+    viewer.seek(start);
+    if (time.end != null) {
+      viewer.set_loop(start, Math.min(frames - 1, Math.round(time.end * fps)));
+      viewer.play();
+    } else {
+      viewer.pause();
+    }
+  } else {
+    viewer.seek(0);
+    viewer.play();
+  }
   setBusy(false);
   setState('ready');
 }
@@ -314,9 +413,133 @@ function applyToggles() {
 
 function onFrame(frame, timeSeconds) {
   const frames = state.viewer.frames();
+  const playing = state.viewer.is_playing();
   $('frame-readout').textContent = `frame ${frame + 1} / ${frames} · ${timeSeconds.toFixed(2)} s`;
   if (document.activeElement !== $('scrubber')) $('scrubber').value = String(frame);
-  $('play-button').textContent = state.viewer.is_playing() ? 'Pause' : 'Play';
+  $('play-button').textContent = playing ? 'Pause' : 'Play';
+  // While the user scrubs or steps, the address follows: copying it shares the moment.
+  if (state.linkable && !playing && frames > 0 && document.body.dataset.state === 'ready') {
+    const url = new URL(location.href);
+    url.hash = fragment_with_time(location.hash, timeSeconds);
+    history.replaceState(null, '', url);
+  }
+}
+
+// ---------------------------------------------------------------- sharing
+
+function openShareDialog() {
+  const dialog = $('share-dialog');
+  const max = state.share.server?.max_share_bytes;
+  const recording = $('share-recording');
+  const canIncludeRecording = !state.openedShare || state.openedShare.includes_recording;
+  recording.disabled = !canIncludeRecording;
+  // On by default when the recording fits the server's limit (with room for the rest).
+  recording.checked = canIncludeRecording && (!max || state.inputBytes < 0.9 * max);
+  $('share-result').hidden = true;
+  $('share-link').value = '';
+  $('share-status').textContent = state.share.server
+    ? `Shares up to ${megabytes(max)} are stored at ${state.share.apiBase}.`
+    : `No share server answers at ${state.share.apiBase}: sharing is not available here.`;
+  $('share-create').disabled = !state.share.server;
+  dialog.showModal();
+}
+
+function createShare() {
+  if (state.busy) return;
+  $('share-create').disabled = true;
+  $('share-result').hidden = true;
+  $('share-status').textContent = 'Encrypting…';
+  setBusy(true);
+  state.client.create_share($('share-recording').checked);
+}
+
+async function onShareSealed(event) {
+  const max = state.share.server?.max_share_bytes ?? Infinity;
+  const size = event.sealed.length;
+  if (size > max) {
+    if (event.includes_recording) {
+      $('share-status').textContent = `With the recording the share is ${megabytes(size)}, over this server's limit of ` +
+        `${megabytes(max)}: sharing it without the recording…`;
+      $('share-recording').checked = false;
+      state.client.create_share(false);
+      return;
+    }
+    $('share-status').textContent = `The share is ${megabytes(size)}; this server takes shares up to ${megabytes(max)}.`;
+    $('share-create').disabled = false;
+    setBusy(false);
+    return;
+  }
+  $('share-status').textContent = `Uploading ${megabytes(size)} (encrypted)…`;
+  const expiry = $('share-expiry').value;
+  try {
+    const created = await uploadShare(state.share.apiBase, event.sealed, expiry);
+    const link = `${location.origin}${location.pathname}#${share_fragment(created.id, event.key)}`;
+    $('share-link').value = link;
+    $('share-result').hidden = false;
+    $('share-status').textContent = `Anyone with this link can open it until ${new Date(created.expires_at).toLocaleString()}` +
+      (event.includes_recording ? ' (with the recording).' : '.');
+    rememberShare({
+      id: created.id,
+      name: state.summary ? $('session-name').textContent : 'reconstruction',
+      link,
+      created: new Date().toISOString(),
+      expires_at: created.expires_at,
+      delete_token: created.delete_token,
+      api: state.share.apiBase,
+    });
+    showSavedShares();
+  } catch (error) {
+    $('share-status').textContent = `Could not upload the share: ${error.message}`;
+  }
+  $('share-create').disabled = false;
+  setBusy(false);
+  setState('ready');
+}
+
+async function copyText(text, button) {
+  try {
+    await navigator.clipboard.writeText(text);
+  } catch {
+    // No clipboard access (an insecure context): select the text for Ctrl-C.
+    $('share-link').select();
+  }
+  const label = button.textContent;
+  button.textContent = 'Copied';
+  setTimeout(() => { button.textContent = label; }, 1500);
+}
+
+function showSavedShares() {
+  const list = savedShares();
+  $('shared-panel').hidden = list.length === 0;
+  $('shared-list').replaceChildren(...list.map((entry) => {
+    const li = document.createElement('li');
+    const what = document.createElement('span');
+    what.className = 'what';
+    what.textContent = entry.name;
+    const when = document.createElement('span');
+    when.className = 'when';
+    const expires = new Date(entry.expires_at);
+    when.textContent = expires < new Date() ? 'expired' : `until ${expires.toLocaleString()}`;
+    const copy = document.createElement('button');
+    copy.type = 'button';
+    copy.textContent = 'Copy link';
+    copy.addEventListener('click', () => copyText(entry.link, copy));
+    const remove = document.createElement('button');
+    remove.type = 'button';
+    remove.textContent = 'Delete';
+    remove.setAttribute('aria-label', `Delete the share of ${entry.name}`);
+    remove.addEventListener('click', async () => {
+      try {
+        await deleteShare(entry.api ?? state.share.apiBase, entry.id, entry.delete_token);
+        forgetShare(entry.id);
+        showSavedShares();
+      } catch (error) {
+        showError('Could not delete the share', error.message);
+      }
+    });
+    li.append(what, when, copy, remove);
+    return li;
+  }));
 }
 
 async function startViewer() {
@@ -382,6 +605,19 @@ function wireControls() {
   $('step-forward').addEventListener('click', () => state.viewer?.step(1));
   $('scrubber').addEventListener('input', (e) => state.viewer?.seek(Number(e.target.value)));
   $('speed').addEventListener('change', (e) => state.viewer?.set_speed(Number(e.target.value)));
+  $('share-button').addEventListener('click', openShareDialog);
+  $('share-create').addEventListener('click', createShare);
+  $('share-close').addEventListener('click', () => $('share-dialog').close());
+  $('share-copy').addEventListener('click', () => copyText($('share-link').value, $('share-copy')));
+  $('rerun-button').addEventListener('click', () => {
+    if (state.busy) return;
+    clearError();
+    setBusy(true);
+    setState('busy');
+    showProgress('reconstructing…', 0);
+    state.reconstructStarted = performance.now();
+    state.client.reconstruct(true);
+  });
   for (const button of document.querySelectorAll('#export-buttons button')) {
     button.addEventListener('click', () => {
       if (state.busy) return;
@@ -391,9 +627,26 @@ function wireControls() {
   }
 }
 
+// What the address asks for: a share, a session by URL, or the sample, maybe at a moment.
+function readAddress() {
+  try {
+    return parse_fragment(location.hash);
+  } catch (error) {
+    showError('This link is not valid', error.message ?? String(error));
+    return { share: null, time: null, sample: false };
+  }
+}
+
 await initViewer();
 wireControls();
 spawnWorker();
 setBusy(false);
+showSavedShares();
+const address = readAddress();
+state.pendingTime = address.time;
+state.share = await loadShareConfig();
 await startViewer();
 if (document.body.dataset.state === 'starting') setState('idle');
+if (address.share) await openShareLink(address.share);
+else if (params.get('url')) await openUrl(params.get('url'));
+else if (address.sample) await openSample();

@@ -124,7 +124,7 @@ describe('the sample, WebGL2 canvas', () => {
   test('WebGPU renders the scene off-screen (pixel read-back)', async () => {
     const { page } = app;
     const result = await page.evaluate(async () => {
-      const { Viewer } = await import('./pkg/egoexo_viewer.js');
+      const { Viewer } = window.egoexo;
       const [w, h] = [960, 720];
       try {
         const rgba = await Viewer.render_offscreen(window.egoexo.scene, 300, w, h, 'webgpu');

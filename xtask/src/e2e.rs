@@ -1,6 +1,7 @@
 //! The app in a real browser: the Playwright suite (`tests/e2e/*.test.mjs`, Node's test runner,
 //! `playwright-core` driving Debian's Chromium) and the bench page (`tests/e2e/bench.mjs`),
-//! both against `dist/` served by [`crate::serve`].
+//! both against `dist/` served by the real server, `egoexo serve` ([`crate::serve`]), with
+//! shares in a fresh folder under `target/e2e`.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -24,15 +25,26 @@ impl BrowserRun {
         c.current_dir(root)
             .env("EGOEXO_E2E_URL", url)
             .env("EGOEXO_CHROMIUM", &self.chromium)
-            .env("EGOEXO_E2E_OUT", &self.out);
+            .env("EGOEXO_E2E_OUT", &self.out)
+            // The CLI tests (`egoexo share` → the page) use the binary the server runs from.
+            .env("EGOEXO_BIN", root.join("target").join("debug").join("egoexo"));
         c
+    }
+
+    /// `egoexo serve` on `dist/` with an empty share store.
+    fn serve(&self, root: &Path) -> Result<serve::Running> {
+        let store = self.out.join("shares");
+        if store.exists() {
+            std::fs::remove_dir_all(&store).with_context(|| format!("clearing {}", store.display()))?;
+        }
+        serve::spawn(root, &root.join("dist"), &store, "127.0.0.1:0")
     }
 }
 
 /// Serves `dist/` and runs every `tests/e2e/*.test.mjs`; returns the counts.
 pub fn run_suite(root: &Path, run: &BrowserRun) -> Result<TestCounts> {
     std::fs::create_dir_all(&run.out)?;
-    let server = serve::spawn(&root.join("dist"), "127.0.0.1:0")?;
+    let server = run.serve(root)?;
     let dir = root.join("tests").join("e2e");
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
         .with_context(|| format!("reading {}", dir.display()))?
@@ -90,7 +102,7 @@ pub struct BenchResult {
 /// Serves `dist/` and runs `web/bench.html` `runs` times through `tests/e2e/bench.mjs`.
 pub fn run_bench(root: &Path, run: &BrowserRun, runs: u32) -> Result<BenchResult> {
     std::fs::create_dir_all(&run.out)?;
-    let server = serve::spawn(&root.join("dist"), "127.0.0.1:0")?;
+    let server = run.serve(root)?;
     let script = root.join("tests").join("e2e").join("bench.mjs");
     let out = cmd::output_checked(run.node(root, &server.url).arg(&script).arg(runs.to_string()))?;
     parse_bench_line(&out, "BENCH")

@@ -13,14 +13,24 @@ pub const LAYERS: &[(&str, &[&str])] = &[
     ("egoexo-infer", &["egoexo-core"]),
     ("egoexo-session", &["egoexo-core", "egoexo-motion-io"]),
     ("egoexo-mocap", &["egoexo-core", "egoexo-motion-io"]),
+    ("egoexo-server", &["egoexo-protocol"]),
     ("egoexo-synth", &["egoexo-core", "egoexo-session"]),
+    ("egoexo-share", &["egoexo-core", "egoexo-motion-io", "egoexo-protocol", "egoexo-session"]),
     (
         "egoexo-dataset",
         &["egoexo-core", "egoexo-motion-io", "egoexo-session", "egoexo-mocap", "egoexo-synth", "egoexo-infer"],
     ),
     (
         "egoexo-web-worker",
-        &["egoexo-core", "egoexo-motion-io", "egoexo-session", "egoexo-infer", "egoexo-scene", "egoexo-protocol"],
+        &[
+            "egoexo-core",
+            "egoexo-motion-io",
+            "egoexo-session",
+            "egoexo-infer",
+            "egoexo-scene",
+            "egoexo-protocol",
+            "egoexo-share",
+        ],
     ),
     ("egoexo-viewer", &["egoexo-core", "egoexo-scene", "egoexo-protocol"]),
     (
@@ -33,6 +43,10 @@ pub const LAYERS: &[(&str, &[&str])] = &[
             "egoexo-synth",
             "egoexo-infer",
             "egoexo-dataset",
+            "egoexo-protocol",
+            "egoexo-share",
+            "egoexo-server",
+            "egoexo-web-worker",
         ],
     ),
 ];

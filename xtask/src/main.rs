@@ -44,7 +44,8 @@ enum Command {
     },
     /// Install (if missing) the tools the tests need, and print where they are.
     Setup,
-    /// Build the web app into dist/ and serve it on 127.0.0.1 (default port 8080).
+    /// Build the web app into dist/ and serve it with `egoexo serve` on 127.0.0.1 (default
+    /// port 8080), shares in target/shares.
     Serve {
         #[command(flatten)]
         app: AppArgs,
@@ -113,11 +114,10 @@ fn main() -> Result<()> {
         }
         Command::Serve { app, port } => {
             app.build(&root)?;
-            let running = serve::spawn(&root.join("dist"), &format!("127.0.0.1:{port}"))?;
-            println!("serving dist/ at {} (Ctrl-C to stop)", running.url);
-            loop {
-                std::thread::park();
-            }
+            let store = root.join("target").join("shares");
+            let running = serve::spawn(&root, &root.join("dist"), &store, &format!("127.0.0.1:{port}"))?;
+            println!("egoexo is at {} (shares in {}; Ctrl-C to stop)", running.url, store.display());
+            running.wait()
         }
         Command::Dist { app } => app.build(&root),
         Command::BenchWeb { app, runs } => {

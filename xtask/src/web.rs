@@ -157,19 +157,31 @@ fn gzipped_len(bytes: &[u8]) -> Result<u64> {
     Ok(encoder.finish()?.len() as u64)
 }
 
-/// `dist/` = `web/` + `public/` + `models/` (the manifest, the files it lists, and any
-/// Markdown model card) + `pkg/`.
+/// Files of `web/` served at the site's root (everything else is a versioned asset).
+const ROOT_FILES: &[&str] = &["index.html", "bench.html", "config.json"];
+
+/// `dist/` as a static site:
+///
+/// ```text
+/// dist/index.html, bench.html   the pages (no-cache), their asset URLs rewritten to v/<build>/
+/// dist/config.json              the page's deployment settings (no-cache, editable in place)
+/// dist/v/<build>/               web/ (scripts, styles, icon) + public/ + models/ + pkg/
+/// ```
+///
+/// `<build>` is a hash of every asset, so assets are immutable under their URL (the server
+/// says so in `Cache-Control`) and a new build never mixes with an old one in a cache.
 fn assemble(root: &Path, models: &Path, pkg: &Path) -> Result<()> {
     let dist = root.join("dist");
     if dist.exists() {
         std::fs::remove_dir_all(&dist).with_context(|| format!("clearing {}", dist.display()))?;
     }
-    copy_tree(&root.join("web"), &dist)?;
-    copy_tree(&root.join("public"), &dist)?;
-    copy_tree(pkg, &dist.join("pkg"))?;
+    let staging = dist.join("v").join("staging");
+    copy_tree_except(&root.join("web"), &staging, ROOT_FILES)?;
+    copy_tree_except(&root.join("public"), &staging, &[])?;
+    copy_tree_except(pkg, &staging.join("pkg"), &[])?;
     let manifest = std::fs::read(models.join("manifest.json"))?;
     let listed = model_files(&manifest).with_context(|| format!("reading {}/manifest.json", models.display()))?;
-    let out = dist.join("models");
+    let out = staging.join("models");
     std::fs::create_dir_all(&out)?;
     std::fs::write(out.join("manifest.json"), &manifest)?;
     for file in listed {
@@ -184,7 +196,61 @@ fn assemble(root: &Path, models: &Path, pkg: &Path) -> Result<()> {
             std::fs::copy(&path, out.join(path.file_name().context("file name")?))?;
         }
     }
+    let build = tree_hash(&staging)?;
+    let assets = dist.join("v").join(&build);
+    std::fs::rename(&staging, &assets)?;
+    for name in ROOT_FILES {
+        let from = root.join("web").join(name);
+        let to = dist.join(name);
+        if name.ends_with(".html") {
+            let html = std::fs::read_to_string(&from).with_context(|| format!("reading {}", from.display()))?;
+            std::fs::write(&to, versioned_html(&html, &format!("v/{build}/")))?;
+        } else {
+            std::fs::copy(&from, &to).with_context(|| format!("copying {}", from.display()))?;
+        }
+    }
+    eprintln!("dist/ assembled, assets under dist/v/{build}/");
     Ok(())
+}
+
+/// A hash of every file under `dir` (relative paths and contents), as 16 hex digits.
+fn tree_hash(dir: &Path) -> Result<String> {
+    let mut files = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d)? {
+            let path = entry?.path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                files.push(path);
+            }
+        }
+    }
+    files.sort();
+    let mut hasher = DefaultHasher::new();
+    for file in files {
+        file.strip_prefix(dir)?.to_string_lossy().hash(&mut hasher);
+        std::fs::read(&file)?.hash(&mut hasher);
+    }
+    Ok(format!("{:016x}", hasher.finish()))
+}
+
+/// `html` with every relative `src="…"` and `href="…"` prefixed by `prefix`.
+fn versioned_html(html: &str, prefix: &str) -> String {
+    let mut out = String::with_capacity(html.len() + 256);
+    let mut rest = html;
+    while let Some(at) = ["src=\"", "href=\""].iter().filter_map(|a| rest.find(a).map(|i| (i, a.len()))).min() {
+        let (index, len) = at;
+        out.push_str(&rest[..index + len]);
+        rest = &rest[index + len..];
+        let absolute = ["/", "#", "http:", "https:", "data:", "mailto:"].iter().any(|p| rest.starts_with(p));
+        if !absolute {
+            out.push_str(prefix);
+        }
+    }
+    out.push_str(rest);
+    out
 }
 
 /// The model files a manifest lists (`model_sets[].{egonet,gate,fusion}.file`); paths must
@@ -205,13 +271,17 @@ fn model_files(manifest: &[u8]) -> Result<Vec<String>> {
     Ok(files)
 }
 
-fn copy_tree(from: &Path, to: &Path) -> Result<()> {
+/// Copies the tree `from` into `to`, leaving out the top-level files named in `except`.
+fn copy_tree_except(from: &Path, to: &Path, except: &[&str]) -> Result<()> {
     std::fs::create_dir_all(to)?;
     for entry in std::fs::read_dir(from).with_context(|| format!("reading {}", from.display()))? {
         let entry = entry?;
         let target = to.join(entry.file_name());
+        if except.iter().any(|n| entry.file_name() == *n) {
+            continue;
+        }
         if entry.file_type()?.is_dir() {
-            copy_tree(&entry.path(), &target)?;
+            copy_tree_except(&entry.path(), &target, &[])?;
         } else {
             std::fs::copy(entry.path(), &target)
                 .with_context(|| format!("copying {} to {}", entry.path().display(), target.display()))?;
@@ -250,6 +320,17 @@ mod tests {
             br#"{"model_sets": [{"egonet": {"file": "../secret"}, "gate": {"file": "g"}, "fusion": {"file": "f"}}]}"#;
         assert!(model_files(escaping).unwrap_err().to_string().contains("leaves the models folder"));
         assert!(model_files(b"{}").is_err());
+    }
+
+    #[test]
+    fn pages_point_at_the_versioned_assets() {
+        let html = r##"<link rel="stylesheet" href="style.css"><link rel="icon" href="favicon.svg">
+<a href="https://egoexo.example/">x</a><a href="#top">t</a><script type="module" src="main.js"></script>
+<link rel="modulepreload" href="pkg/egoexo_viewer.js">"##;
+        let out = versioned_html(html, "v/0123/");
+        assert!(out.contains(r#"href="v/0123/style.css""#) && out.contains(r#"href="v/0123/favicon.svg""#));
+        assert!(out.contains(r#"src="v/0123/main.js""#) && out.contains(r#"href="v/0123/pkg/egoexo_viewer.js""#));
+        assert!(out.contains(r#"href="https://egoexo.example/""#) && out.contains(r##"href="#top""##));
     }
 
     #[test]

@@ -32,6 +32,10 @@ enum Command {
     Eval(commands::eval::Args),
     /// Reconstruct the wearer's motion and write it as AMASS npz, BVH, glb, CSV or JSON.
     Reconstruct(commands::reconstruct::Args),
+    /// Serve the page and the share API (share links), storing shares on disk or in S3.
+    Serve(commands::serve::Args),
+    /// Share a session's reconstruction by link (end-to-end encrypted), or `share get` one.
+    Share(commands::share::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -43,6 +47,8 @@ fn main() -> std::process::ExitCode {
         Command::Synth(args) => commands::synth::run(args),
         Command::Eval(args) => commands::eval::run(args),
         Command::Reconstruct(args) => commands::reconstruct::run(args),
+        Command::Serve(args) => commands::serve::run(args),
+        Command::Share(args) => commands::share::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

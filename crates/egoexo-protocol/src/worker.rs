@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 
 /// The protocol's version; the worker says it in [`WorkerEvent::Ready`], and the page refuses
 /// a worker that speaks another.
-pub const WORKER_PROTOCOL_VERSION: u32 = 1;
+pub const WORKER_PROTOCOL_VERSION: u32 = 2;
 
 /// A job's number, chosen by the page (unique per worker).
 pub type JobId = u32;
@@ -41,6 +41,14 @@ pub enum WorkerRequest<B> {
     Reconstruct { job: JobId, overlay: bool },
     /// Write the last reconstruction as a motion file. Answered by `exported` or `error`.
     Export { job: JobId, format: ExportFormat },
+    /// Pack what is shown into a share container (with the recording when
+    /// `include_recording` and a session is open) and seal it under a fresh random key.
+    /// Answered by `share-sealed` or `error`.
+    CreateShare { job: JobId, include_recording: bool },
+    /// Open a sealed share with the key from its link: show it, and open its recording if it
+    /// has one. Answered by `share-opened` or `error` (kind `share-invalid` for a wrong key or
+    /// an altered share).
+    OpenShare { job: JobId, sealed: B, key: String },
     /// Stop job `job`: a queued job never starts, a running reconstruction stops at its next
     /// window; either answers `cancelled`. A finished job is not affected.
     Cancel { job: JobId },
@@ -54,7 +62,9 @@ impl<B> WorkerRequest<B> {
         match self {
             WorkerRequest::Open { job, .. }
             | WorkerRequest::Reconstruct { job, .. }
-            | WorkerRequest::Export { job, .. } => Some(*job),
+            | WorkerRequest::Export { job, .. }
+            | WorkerRequest::CreateShare { job, .. }
+            | WorkerRequest::OpenShare { job, .. } => Some(*job),
             WorkerRequest::WarmUp | WorkerRequest::Cancel { .. } | WorkerRequest::PanicForTest => None,
         }
     }
@@ -66,6 +76,7 @@ impl<B> WorkerRequest<B> {
             WorkerRequest::Open { input: SessionInput::Files { files, .. }, .. } => {
                 files.iter().map(|f| &f.bytes).collect()
             }
+            WorkerRequest::OpenShare { sealed, .. } => vec![sealed],
             _ => Vec::new(),
         }
     }
@@ -87,6 +98,10 @@ impl<B> WorkerRequest<B> {
             }
             WorkerRequest::Reconstruct { job, overlay } => WorkerRequest::Reconstruct { job, overlay },
             WorkerRequest::Export { job, format } => WorkerRequest::Export { job, format },
+            WorkerRequest::CreateShare { job, include_recording } => {
+                WorkerRequest::CreateShare { job, include_recording }
+            }
+            WorkerRequest::OpenShare { job, sealed, key } => WorkerRequest::OpenShare { job, sealed: f(sealed)?, key },
             WorkerRequest::Cancel { job } => WorkerRequest::Cancel { job },
             WorkerRequest::PanicForTest => WorkerRequest::PanicForTest,
         })
@@ -171,6 +186,19 @@ pub enum WorkerEvent<B> {
     Reconstructed { job: JobId, scene: B, summary: ReconstructionSummary },
     /// The file of export job `job`.
     Exported { job: JobId, file: ExportedFile<B> },
+    /// The sealed share of job `job`, to upload, and its key (base64url) for the link's
+    /// fragment — it must never be sent to the server.
+    ShareSealed { job: JobId, sealed: B, key: String, includes_recording: bool },
+    /// The share of job `job` is open and shown: its scene, summaries, and whether its
+    /// recording came with it (then `reconstruct` runs again).
+    ShareOpened {
+        job: JobId,
+        scene: B,
+        summary: ReconstructionSummary,
+        session: SessionSummary,
+        includes_recording: bool,
+        created_by: String,
+    },
     /// Job `job` was cancelled; nothing of it is kept.
     Cancelled { job: JobId },
     /// A job (or, with `job` null, the model loading of a warm-up) failed.
@@ -196,6 +224,8 @@ impl<B> WorkerEvent<B> {
             | WorkerEvent::Imported { job, .. }
             | WorkerEvent::Reconstructed { job, .. }
             | WorkerEvent::Exported { job, .. }
+            | WorkerEvent::ShareSealed { job, .. }
+            | WorkerEvent::ShareOpened { job, .. }
             | WorkerEvent::Cancelled { job } => Some(*job),
             WorkerEvent::Error { job, .. } => *job,
             WorkerEvent::Ready { .. }
@@ -210,6 +240,8 @@ impl<B> WorkerEvent<B> {
         match self {
             WorkerEvent::Reconstructed { scene, .. } => vec![scene],
             WorkerEvent::Exported { file, .. } => vec![&file.bytes],
+            WorkerEvent::ShareSealed { sealed, .. } => vec![sealed],
+            WorkerEvent::ShareOpened { scene, .. } => vec![scene],
             _ => Vec::new(),
         }
     }
@@ -225,6 +257,12 @@ impl<B> WorkerEvent<B> {
                 job,
                 file: ExportedFile { bytes: f(file.bytes)?, file_name: file.file_name, mime_type: file.mime_type },
             },
+            WorkerEvent::ShareSealed { job, sealed, key, includes_recording } => {
+                WorkerEvent::ShareSealed { job, sealed: f(sealed)?, key, includes_recording }
+            }
+            WorkerEvent::ShareOpened { job, scene, summary, session, includes_recording, created_by } => {
+                WorkerEvent::ShareOpened { job, scene: f(scene)?, summary, session, includes_recording, created_by }
+            }
             WorkerEvent::Ready { protocol } => WorkerEvent::Ready { protocol },
             WorkerEvent::Status { text } => WorkerEvent::Status { text },
             WorkerEvent::Models { summary } => WorkerEvent::Models { summary },
@@ -262,6 +300,8 @@ pub enum JobStage {
     ExoFusion,
     /// The fusion of the ego-only comparison overlay, per window.
     EgoOnlyOverlay,
+    /// Packing and sealing, or opening, a share.
+    Share,
 }
 
 impl JobStage {
@@ -272,6 +312,7 @@ impl JobStage {
             JobStage::EgoPass => "ego pass",
             JobStage::ExoFusion => "exo fusion",
             JobStage::EgoOnlyOverlay => "ego-only overlay",
+            JobStage::Share => "preparing the share",
         }
     }
 }
@@ -288,6 +329,8 @@ pub enum ErrorStage {
     Reconstruct,
     /// Exporting.
     Export,
+    /// Making or opening a share.
+    Share,
     /// Reading the request itself.
     Request,
 }
@@ -313,6 +356,9 @@ pub enum ErrorKind {
     NoSession,
     /// A request needs a reconstruction and there is none.
     NoReconstruction,
+    /// A share cannot be opened: the link's key is wrong, the share was altered, or it is not
+    /// a share of a version this page reads.
+    ShareInvalid,
     /// The message is not a request of this protocol version.
     BadRequest,
 }

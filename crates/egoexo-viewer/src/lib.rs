@@ -87,7 +87,7 @@ pub mod scene;
 mod web;
 
 #[cfg(target_arch = "wasm32")]
-pub use web::{Viewer, WorkerClient};
+pub use web::{Viewer, WorkerClient, fragment_with_time, parse_fragment, share_fragment};
 
 pub use error::{ActiveBackend, BackendPreference, ViewerError};
 

@@ -35,6 +35,8 @@ pub struct Playback {
     position: f64,
     playing: bool,
     speed: f64,
+    /// Frames `start..=end` played in a loop, if set.
+    loop_range: Option<(usize, usize)>,
 }
 
 impl Playback {
@@ -42,7 +44,7 @@ impl Playback {
     /// or non-positive `fps` is treated as 30; scenes are validated before they get here).
     pub fn new(frames: usize, fps: f64) -> Self {
         let fps = if fps.is_finite() && fps > 0.0 { fps } else { 30.0 };
-        Self { frames, fps, position: 0.0, playing: false, speed: 1.0 }
+        Self { frames, fps, position: 0.0, playing: false, speed: 1.0, loop_range: None }
     }
 
     /// Number of frames on the timeline.
@@ -129,16 +131,34 @@ impl Playback {
         Ok(self.frame())
     }
 
+    /// Plays frames `start..=end` in a loop (clamped to the timeline; a link's `t=a-b`), or the
+    /// whole timeline with `None`. Seeking and stepping may still leave the range; playing
+    /// from outside it jumps to its start.
+    pub fn set_loop(&mut self, range: Option<(usize, usize)>) {
+        let last = self.frames.saturating_sub(1);
+        self.loop_range = range.map(|(a, b)| (a.min(last), b.min(last))).filter(|(a, b)| a < b);
+    }
+
+    /// The looped frames, if any.
+    pub fn loop_range(&self) -> Option<(usize, usize)> {
+        self.loop_range
+    }
+
     /// Advances by `dt_s` seconds of wall-clock time (at most [`MAX_ADVANCE_S`]; negative or
-    /// non-finite counts as 0) when playing, wrapping past the last frame to the first.
-    /// Returns whether the shown frame changed.
+    /// non-finite counts as 0) when playing, wrapping past the last frame (or the loop's end)
+    /// to the first (or the loop's start). Returns whether the shown frame changed.
     pub fn advance(&mut self, dt_s: f64) -> bool {
         if !self.playing || self.frames < 2 {
             return false;
         }
         let dt = if dt_s.is_finite() { dt_s.clamp(0.0, MAX_ADVANCE_S) } else { 0.0 };
         let before = self.frame();
-        self.position = (self.position + dt * self.fps * self.speed).rem_euclid(self.frames as f64);
+        let (start, end) = self.loop_range.map_or((0.0, self.frames as f64), |(a, b)| (a as f64, (b + 1) as f64));
+        if self.position < start || self.position >= end {
+            self.position = start;
+        } else {
+            self.position = start + (self.position - start + dt * self.fps * self.speed).rem_euclid(end - start);
+        }
         self.frame() != before
     }
 
@@ -181,6 +201,23 @@ mod tests {
         p.advance(0.25); // 2.5 frames: 8 → 10.5 → wraps to 0.5
         assert_eq!(p.frame(), 0);
         assert!(p.is_playing());
+    }
+
+    #[test]
+    fn a_loop_range_wraps_inside_itself() {
+        let mut p = Playback::new(100, 10.0);
+        p.set_loop(Some((20, 29)));
+        p.play();
+        p.advance(0.0);
+        assert_eq!(p.frame(), 20, "playing from outside the range starts at its start");
+        for _ in 0..40 {
+            p.advance(0.1);
+            assert!((20..=29).contains(&p.frame()), "{}", p.frame());
+        }
+        p.set_loop(Some((50, 500)));
+        assert_eq!(p.loop_range(), Some((50, 99)));
+        p.set_loop(Some((5, 5)));
+        assert_eq!(p.loop_range(), None, "an empty range plays everything");
     }
 
     #[test]

@@ -1,12 +1,14 @@
 //! [`SessionWorker`]: the worker's state and operations in plain Rust — load the models,
 //! import a session, reconstruct it step by step (ego-exo plus the ego-only overlay, sharing
-//! one ego pass), build the viewer's scene, export the motion. The browser's message loop
-//! ([`crate::WorkerApp`], wasm32 only) and the native tests drive the same code; everything
-//! that can fail returns [`WorkerError`], whose [`WorkerError::kind`] is what the page sees.
+//! one ego pass), build the viewer's scene, export the motion, pack it into a share container
+//! and open one. The browser's message loop ([`crate::WorkerApp`], wasm32 only), the CLI's
+//! `egoexo share` and the native tests drive the same code; everything that can fail returns
+//! [`WorkerError`], whose [`WorkerError::kind`] is what the page sees.
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
+use egoexo_core::SmplMotion;
 use egoexo_core::aligned::AlignedSession;
 use egoexo_core::camera::Projection;
 use egoexo_core::metrics::MetricsAccumulator;
@@ -21,9 +23,11 @@ use egoexo_protocol::worker::{
     ObserverSummary, ReconstructionSummary, SessionSummary,
 };
 use egoexo_session::align::DEFAULT_FPS;
+use egoexo_session::format::write_egoexo_zip;
 use egoexo_session::{
     AlignError, AlignOptions, FileTree, ImportError, ImportOptions, Imported, Limits, align, import_session,
 };
+use egoexo_share::{ShareContents, ShareError, ShareManifest};
 use thiserror::Error;
 
 /// Everything that can go wrong in the worker. Library errors keep their exact messages
@@ -48,6 +52,10 @@ pub enum WorkerError {
     NoReconstruction,
     #[error("cannot build the scene: {0}")]
     Scene(String),
+    #[error(transparent)]
+    Share(#[from] ShareError),
+    #[error("cannot write the recording into the share: {0}")]
+    ShareRecording(String),
 }
 
 impl WorkerError {
@@ -61,6 +69,8 @@ impl WorkerError {
             WorkerError::Export(_) => ErrorKind::Export,
             WorkerError::NoSession => ErrorKind::NoSession,
             WorkerError::NoReconstruction => ErrorKind::NoReconstruction,
+            WorkerError::Share(_) => ErrorKind::ShareInvalid,
+            WorkerError::ShareRecording(_) => ErrorKind::Export,
         }
     }
 
@@ -75,14 +85,33 @@ impl WorkerError {
 struct OpenSession {
     imported: Imported,
     aligned: AlignedSession,
+    summary: SessionSummary,
 }
 
-/// The reconstructions of the open session.
+/// What is shown: a reconstruction made here, or one opened from a share.
 #[derive(Debug)]
 struct Results {
-    ego_exo: Reconstruction,
-    ego_only: Option<Reconstruction>,
+    /// The session's name (export file names).
+    name: String,
+    /// The method of `motion`.
+    method: String,
+    /// The motion the exports write (the full method).
+    motion: SmplMotion,
+    /// The viewer's scene, as JSON.
+    scene_json: Vec<u8>,
     summary: ReconstructionSummary,
+    /// The session it was made from.
+    session: SessionSummary,
+    /// The reconstructions themselves, when made here (an opened share has only the motion).
+    made_here: Option<(Reconstruction, Option<Reconstruction>)>,
+}
+
+/// A share opened by [`SessionWorker::open_share`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct OpenedShare {
+    pub manifest: ShareManifest,
+    /// The viewer's scene (JSON).
+    pub scene_json: Vec<u8>,
 }
 
 /// A file made by [`SessionWorker::export`].
@@ -190,10 +219,17 @@ impl SessionWorker {
     pub fn import(&mut self, tree: &FileTree) -> Result<SessionSummary, WorkerError> {
         self.session = None;
         self.results = None;
-        let imported = import_session(tree, &ImportOptions::default())?;
+        self.open_imported(import_session(tree, &ImportOptions::default())?)
+    }
+
+    /// Opens a session imported elsewhere (the CLI imports with its own options); replaces
+    /// the open session.
+    pub fn open_imported(&mut self, imported: Imported) -> Result<SessionSummary, WorkerError> {
+        self.session = None;
+        self.results = None;
         let aligned = align_for(&imported, self.fps())?;
         let summary = session_summary(&imported, &aligned);
-        self.session = Some(OpenSession { imported, aligned });
+        self.session = Some(OpenSession { imported, aligned, summary: summary.clone() });
         Ok(summary)
     }
 
@@ -248,7 +284,18 @@ impl SessionWorker {
         let ego_exo = reconstructions.next().ok_or(WorkerError::NoReconstruction)?;
         let ego_only = reconstructions.next();
         let summary = reconstruction_summary(&open.aligned, &ego_exo, ego_only.as_ref(), windows, runs);
-        self.results = Some(Results { ego_exo, ego_only, summary: summary.clone() });
+        let scene = crate::scene::build_scene(&open.aligned, &ego_exo, ego_only.as_ref());
+        scene.check().map_err(WorkerError::Scene)?;
+        let scene_json = serde_json::to_vec(&scene).map_err(|e| WorkerError::Scene(e.to_string()))?;
+        self.results = Some(Results {
+            name: open.aligned.name.clone(),
+            method: ego_exo.method.name().to_string(),
+            motion: ego_exo.motion.clone(),
+            scene_json,
+            summary: summary.clone(),
+            session: open.summary.clone(),
+            made_here: Some((ego_exo, ego_only)),
+        });
         Ok(summary)
     }
 
@@ -270,14 +317,14 @@ impl SessionWorker {
         self.finish_reconstruction(task)
     }
 
-    /// The last reconstruction (the full method), if any.
+    /// The last reconstruction made here (the full method), if any.
     pub fn reconstruction(&self) -> Option<&Reconstruction> {
-        self.results.as_ref().map(|r| &r.ego_exo)
+        self.results.as_ref().and_then(|r| r.made_here.as_ref()).map(|(ego_exo, _)| ego_exo)
     }
 
     /// The ego-only reconstruction of the overlay, if any.
     pub fn ego_only_reconstruction(&self) -> Option<&Reconstruction> {
-        self.results.as_ref().and_then(|r| r.ego_only.as_ref())
+        self.results.as_ref().and_then(|r| r.made_here.as_ref()).and_then(|(_, ego_only)| ego_only.as_ref())
     }
 
     /// The summary of the last reconstruction.
@@ -285,26 +332,70 @@ impl SessionWorker {
         self.results.as_ref().map(|r| &r.summary)
     }
 
-    /// The viewer's scene of the last reconstruction ([`egoexo_scene::SceneData`]) as JSON.
+    /// The viewer's scene of what is shown ([`egoexo_scene::SceneData`]) as JSON.
     pub fn scene_json(&self) -> Result<Vec<u8>, WorkerError> {
-        let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
-        let results = self.results.as_ref().ok_or(WorkerError::NoReconstruction)?;
-        let scene = crate::scene::build_scene(&open.aligned, &results.ego_exo, results.ego_only.as_ref());
-        scene.check().map_err(WorkerError::Scene)?;
-        serde_json::to_vec(&scene).map_err(|e| WorkerError::Scene(e.to_string()))
+        Ok(self.results.as_ref().ok_or(WorkerError::NoReconstruction)?.scene_json.clone())
     }
 
-    /// Writes the reconstructed motion (the full method) in `format`.
+    /// Writes the shown motion (the full method) in `format`.
     pub fn export(&self, format: ExportFormat) -> Result<ExportedFile, WorkerError> {
-        let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
         let results = self.results.as_ref().ok_or(WorkerError::NoReconstruction)?;
         let format = motion_format(format);
-        let bytes = egoexo_motion_io::write(format, &results.ego_exo.motion)?;
+        let bytes = egoexo_motion_io::write(format, &results.motion)?;
         Ok(ExportedFile {
             bytes,
-            file_name: format!("{}-{}.{}", open.aligned.name, results.ego_exo.method.name(), format.extension()),
+            file_name: format!("{}-{}.{}", results.name, results.method, format.extension()),
             mime_type: format.mime_type(),
         })
+    }
+
+    /// What is shown, as a share container (`egoexo_share::container`; not yet sealed),
+    /// with the recording as a `.egoexo` session when `include_recording` and the session is
+    /// open here. `created_by` names the app (`egoexo 0.1.0 (page)`).
+    pub fn pack_share(&self, include_recording: bool, created_by: &str) -> Result<Vec<u8>, WorkerError> {
+        let results = self.results.as_ref().ok_or(WorkerError::NoReconstruction)?;
+        let session_egoexo = match (&self.session, include_recording) {
+            (Some(open), true) => {
+                Some(write_egoexo_zip(&open.imported.session).map_err(|e| WorkerError::ShareRecording(e.to_string()))?)
+            }
+            _ => None,
+        };
+        let contents = ShareContents {
+            manifest: ShareManifest::new(&results.name, created_by, results.summary.clone(), results.session.clone()),
+            scene_json: results.scene_json.clone(),
+            motion: results.motion.clone(),
+            session_egoexo,
+        };
+        Ok(egoexo_share::pack(&contents)?)
+    }
+
+    /// Whether a share made now could include the recording (a session is open here).
+    pub fn can_share_recording(&self) -> bool {
+        self.session.is_some()
+    }
+
+    /// Opens a share container (already opened from its envelope): shows its scene and motion
+    /// (exports work), and when it includes the recording, opens that session so it can be
+    /// reconstructed again.
+    pub fn open_share(&mut self, container: Vec<u8>) -> Result<OpenedShare, WorkerError> {
+        let contents = egoexo_share::unpack(container)?;
+        self.results = None;
+        self.session = None;
+        if let Some(recording) = contents.session_egoexo {
+            let name = format!("{}.egoexo", contents.manifest.name);
+            self.import(&FileTree::from_zip(name, recording, Limits::default())?)?;
+        }
+        let manifest = contents.manifest;
+        self.results = Some(Results {
+            name: manifest.name.clone(),
+            method: manifest.summary.method.clone(),
+            motion: contents.motion,
+            scene_json: contents.scene_json.clone(),
+            summary: manifest.summary.clone(),
+            session: manifest.session.clone(),
+            made_here: None,
+        });
+        Ok(OpenedShare { manifest, scene_json: contents.scene_json })
     }
 }
 

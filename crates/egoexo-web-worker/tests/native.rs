@@ -346,3 +346,40 @@ fn the_scene_puts_rays_on_the_lines_of_sight_and_is_consistent() {
     }
     assert!(rays > 100, "{rays} rays drawn");
 }
+
+/// A share packed here opens in another worker with the same scene and exports, and with its
+/// recording it can be reconstructed again; without, it cannot.
+#[test]
+fn a_packed_share_opens_elsewhere_with_the_same_scene_exports_and_recording() {
+    let (worker, _) = reconstructed();
+    let sealed_scene = worker.scene_json().unwrap();
+    for include_recording in [true, false] {
+        let container = worker.pack_share(include_recording, "egoexo test").unwrap();
+        let key = egoexo_share::link::random_key().unwrap();
+        let iv = egoexo_share::envelope::random_iv().unwrap();
+        let sealed = egoexo_share::envelope::seal(&key, &iv, &container).unwrap();
+        let opened_bytes = egoexo_share::envelope::open(&key, &sealed).unwrap();
+
+        let mut other = worker_with_models();
+        let opened = other.open_share(opened_bytes).unwrap();
+        assert_eq!(opened.scene_json, sealed_scene);
+        assert_eq!(opened.manifest.name, "105_36");
+        assert_eq!(opened.manifest.created_by, "egoexo test");
+        assert_eq!(opened.manifest.includes_recording, include_recording);
+        assert_eq!(other.scene_json().unwrap(), sealed_scene);
+        for format in ExportFormat::ALL {
+            assert_eq!(other.export(format).unwrap(), worker.export(format).unwrap(), "{format:?}");
+        }
+        let rerun = other.reconstruct(true, &mut |_| true);
+        if include_recording {
+            assert_eq!(rerun.unwrap().frames, worker.reconstruction_summary().unwrap().frames);
+            assert_eq!(other.scene_json().unwrap(), sealed_scene, "re-running gives the same scene");
+        } else {
+            assert!(matches!(rerun, Err(WorkerError::NoSession)));
+        }
+    }
+    // An altered container is refused with the share's error kind.
+    let mut other = worker_with_models();
+    let err = other.open_share(b"PK not really".to_vec()).unwrap_err();
+    assert_eq!(err.kind(), ErrorKind::ShareInvalid);
+}

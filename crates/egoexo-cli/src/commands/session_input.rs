@@ -21,6 +21,13 @@ pub struct SessionInput {
     /// A `.egoexo` (zip or folder), an Aria MPS folder (one device, or the multi-device layout
     /// wearer/ + observers/<id>/), a Nymeria sequence folder, or a zip of any of them.
     pub session: PathBuf,
+    #[command(flatten)]
+    pub options: ImportArgs,
+}
+
+/// How a session is read: keypoint files to attach, the clock, COCO timing.
+#[derive(Clone, Debug, clap::Args)]
+pub struct ImportArgs {
     /// Attach a keypoint file to an observer: `<observer-id>=<file>` (JSON lines, or COCO
     /// JSON). Repeatable; replaces keypoints the session already has.
     #[arg(long = "keypoints", value_name = "ID=FILE")]
@@ -39,6 +46,13 @@ pub struct SessionInput {
 impl SessionInput {
     /// Imports the session with the chosen options.
     pub fn import(&self) -> Result<Imported> {
+        self.options.import(&self.session)
+    }
+}
+
+impl ImportArgs {
+    /// Imports the session at `path` with these options.
+    pub fn import(&self, path: &std::path::Path) -> Result<Imported> {
         let mut keypoint_files = Vec::new();
         for spec in &self.keypoints {
             let Some((id, path)) = spec.split_once('=') else {
@@ -55,6 +69,6 @@ impl SessionInput {
             coco: CocoTiming { fps: self.coco_fps, start_ns: self.coco_start_ns },
             keypoint_files,
         };
-        Ok(import_path(&self.session, &options)?)
+        Ok(import_path(path, &options)?)
     }
 }

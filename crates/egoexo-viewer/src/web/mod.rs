@@ -3,10 +3,12 @@
 //! only for `wasm32`.
 
 mod gpu;
+mod links;
 mod offscreen;
 mod renderer;
 mod viewer;
 mod worker_client;
 
+pub use links::{fragment_with_time, parse_fragment, share_fragment};
 pub use viewer::Viewer;
 pub use worker_client::WorkerClient;

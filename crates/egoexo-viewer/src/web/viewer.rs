@@ -86,11 +86,15 @@ fn replace_canvas(old: &HtmlCanvasElement) -> Result<HtmlCanvasElement, ViewerEr
     let fresh = gpu::scratch_canvas(old.width(), old.height())?;
     for name in old.get_attribute_names().iter() {
         if let Some(name) = name.as_string()
+            && name != "style"
             && let Some(value) = old.get_attribute(&name)
         {
             fresh.set_attribute(&name, &value).map_err(|e| ViewerError::Dom(format!("copying {name}: {e:?}")))?;
         }
     }
+    // Inline styles through the CSSOM: a Content-Security-Policy without 'unsafe-inline'
+    // refuses a `style` attribute set by script.
+    fresh.style().set_css_text(&old.style().css_text());
     if old.parent_node().is_some() {
         old.replace_with_with_node_1(&fresh).map_err(|e| ViewerError::Dom(format!("replacing the canvas: {e:?}")))?;
     }
@@ -778,6 +782,22 @@ impl Viewer {
     /// running. Returns the frame shown.
     pub fn seek(&self, frame: f64) -> Result<usize, JsError> {
         self.update(|s| Ok(s.playback.seek(frame)?))
+    }
+
+    /// Plays frames `start..=end` in a loop (a link's `t=a-b`); `clear_loop` plays everything.
+    pub fn set_loop(&self, start: usize, end: usize) -> Result<(), JsError> {
+        self.update(|s| {
+            s.playback.set_loop(Some((start, end)));
+            Ok(())
+        })
+    }
+
+    /// Plays the whole timeline again.
+    pub fn clear_loop(&self) -> Result<(), JsError> {
+        self.update(|s| {
+            s.playback.set_loop(None);
+            Ok(())
+        })
     }
 
     /// The frame shown (0-based).

@@ -89,6 +89,23 @@ impl WorkerClient {
         Ok(job)
     }
 
+    /// Packs and seals what is shown into a share (with the recording when
+    /// `include_recording` and a session is open). Returns the job number; the answer is
+    /// `share-sealed` with the bytes to upload and the key for the link.
+    pub fn create_share(&mut self, include_recording: bool) -> Result<JobId, JsError> {
+        let job = self.next_job();
+        self.send(&Request::CreateShare { job, include_recording })?;
+        Ok(job)
+    }
+
+    /// Opens a sealed share (the bytes from the API) with the key from the link; `sealed` is
+    /// transferred to the worker. Returns the job number.
+    pub fn open_share(&mut self, sealed: Uint8Array, key: String) -> Result<JobId, JsError> {
+        let job = self.next_job();
+        self.send(&Request::OpenShare { job, sealed: JsBytes(sealed), key })?;
+        Ok(job)
+    }
+
     /// Cancels the current job; its events from now on are dropped by [`Self::receive`].
     /// Returns its number, if there was one.
     pub fn cancel(&mut self) -> Result<Option<JobId>, JsError> {

@@ -222,6 +222,14 @@ describe('links to other things', () => {
       assert.equal(await app.text('#session-name'), hostile);
       assert.equal(await app.page.evaluate(() => document.querySelectorAll('main img').length), 0);
       assert.equal(await app.page.evaluate(() => window.pwned), undefined);
+      // An observer id cannot hold HTML: the import refuses it, and the message is text.
+      const observers = join(folder, 'observers');
+      cpSync(join(observers, 'observer-1'), join(observers, hostile), { recursive: true });
+      await app.page.setInputFiles('#folder-input', folder);
+      assert.equal(await app.waitState('error', 60_000), 'error');
+      assert.ok((await app.text('#error-message')).includes(hostile), await app.text('#error-message'));
+      assert.equal(await app.page.evaluate(() => document.querySelectorAll('main img').length), 0);
+      assert.equal(await app.page.evaluate(() => window.pwned), undefined);
     } finally {
       await app.close();
       rmSync(dir, { recursive: true, force: true });

@@ -248,6 +248,24 @@ fn oversized_uploads_are_refused_and_nothing_is_stored() {
 }
 
 #[test]
+fn a_store_that_cannot_write_answers_507_and_says_so_in_json() {
+    let server = start(ApiLimits::default());
+    let agent = agent();
+    // Where the shares folder should be stands a file: every write fails.
+    let shares = server.store_dir.path().join("shares");
+    let _ = std::fs::remove_dir_all(&shares);
+    std::fs::write(&shares, b"not a folder").unwrap();
+    let (status, body) = answer(agent.post(format!("{}/api/shares", server.url)).send(&b"sealed"[..]));
+    let error = api_error(&body);
+    assert_eq!((status, error.error.kind), (507, ApiErrorKind::Storage));
+    assert!(
+        !error.error.message.contains(&server.store_dir.path().display().to_string()),
+        "no paths leak: {}",
+        error.error.message
+    );
+}
+
+#[test]
 fn uploads_are_rate_limited_per_client() {
     let server = start(ApiLimits { uploads_per_minute: 5, ..ApiLimits::default() });
     let agent = agent();

@@ -69,15 +69,7 @@ fn download(url: &str, id: &ShareId) -> (u16, Vec<u8>) {
 }
 
 fn random(len: usize, seed: u64) -> Vec<u8> {
-    let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-    (0..len)
-        .map(|_| {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x as u8
-        })
-        .collect()
+    egoexo_test_support::pseudo_random_bytes(len, seed)
 }
 
 fn egoexo(args: &[&str]) -> std::process::Output {
@@ -130,6 +122,19 @@ fn a_session_shared_from_the_cli_comes_back_through_share_get() {
     // The recording inside is a session egoexo reads.
     let inspected = egoexo(&["inspect", &folder.path().join("session.egoexo").display().to_string()]);
     assert!(inspected.status.success(), "{}", String::from_utf8_lossy(&inspected.stderr));
+
+    // The downloaded folder is a reconstruction to share again (here without the recording).
+    let out = egoexo(&["share", &folder.path().display().to_string(), "--server", &server.url, "--no-recording"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let again = String::from_utf8(out.stdout).unwrap().trim().to_string();
+    assert_ne!(again, link);
+    let second = tempfile::tempdir().unwrap();
+    let out = egoexo(&["share", "get", &again, "-o", &second.path().display().to_string()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let read = |dir: &Path, name: &str| std::fs::read(dir.join(name)).unwrap();
+    assert_eq!(read(second.path(), "scene.json"), read(folder.path(), "scene.json"));
+    assert_eq!(read(second.path(), "105_36-ego-exo.bvh"), read(folder.path(), "105_36-ego-exo.bvh"));
+    assert!(!second.path().join("session.egoexo").exists());
 
     // A changed key does not open it, and says why.
     let mut altered = link.clone();

@@ -93,15 +93,7 @@ fn upload(agent: &ureq::Agent, url: &str, bytes: &[u8], expires: &str) -> Create
 }
 
 fn random(len: usize, seed: u64) -> Vec<u8> {
-    let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-    (0..len)
-        .map(|_| {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x as u8
-        })
-        .collect()
+    egoexo_test_support::pseudo_random_bytes(len, seed)
 }
 
 /// Every file under `dir`, relative.

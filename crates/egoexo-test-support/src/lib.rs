@@ -69,3 +69,17 @@ pub fn cmu_dir() -> Option<PathBuf> {
         None
     }
 }
+
+/// `len` deterministic pseudo-random bytes (xorshift64 from `seed`): test payloads that do
+/// not compress and differ per seed.
+pub fn pseudo_random_bytes(len: usize, seed: u64) -> Vec<u8> {
+    let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    (0..len)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x as u8
+        })
+        .collect()
+}

@@ -1,7 +1,8 @@
 //! `egoexo share <session> --server URL`: reconstruct a session as the page does, seal it in a
 //! share and upload it (the same container and envelope as the page's Share button; the key
-//! stays in the printed link). `egoexo share get <link> -o DIR`: download, open and unpack
-//! a share, with the motion in every export format.
+//! stays in the printed link). The input may also be a reconstruction already shared: a
+//! folder written by `share get`, re-shared as it is. `egoexo share get <link> -o DIR`:
+//! download, open and unpack a share, with the motion in every export format.
 
 use std::path::PathBuf;
 
@@ -9,7 +10,7 @@ use anyhow::{Context, Result, bail};
 use egoexo_protocol::share::{ApiError, CreatedShare, Expiry};
 use egoexo_protocol::worker::ExportFormat;
 use egoexo_share::ShareLink;
-use egoexo_share::envelope;
+use egoexo_share::{container, envelope};
 use egoexo_web_worker::SessionWorker;
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -24,8 +25,9 @@ const CREATED_BY: &str = concat!("egoexo ", env!("CARGO_PKG_VERSION"), " (CLI)")
 pub struct Args {
     #[command(subcommand)]
     pub command: Option<ShareCommand>,
-    /// The session to reconstruct and share: a `.egoexo`, an Aria MPS folder, a Nymeria
-    /// sequence, or a zip of any of them.
+    /// The session to reconstruct and share (a `.egoexo`, an Aria MPS folder, a Nymeria
+    /// sequence, or a zip of any of them), or a reconstruction to share again (a folder
+    /// written by `egoexo share get`).
     #[arg(required = true)]
     pub session: Option<PathBuf>,
     #[command(flatten)]
@@ -95,8 +97,56 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 fn run_create(session: PathBuf, args: CreateArgs) -> Result<()> {
-    let server = args.server.context("--server is required")?;
+    let server = args.server.clone().context("--server is required")?;
     let page = format!("{}/", server.trim_end_matches('/'));
+    let (container, what) = if session.join(container::MANIFEST_FILE).is_file() {
+        reshare(&session, !args.no_recording)?
+    } else {
+        reconstruct_and_pack(&session, &args)?
+    };
+    let key = egoexo_share::link::random_key()?;
+    let sealed = envelope::seal(&key, &envelope::random_iv()?, &container)?;
+    let url = format!("{}api/shares?expires={}", page, args.expires.as_str());
+    let mut response = agent().post(&url).send(&sealed[..]).with_context(|| format!("cannot reach {url}"))?;
+    let status = response.status().as_u16();
+    let body = response.body_mut().read_to_vec()?;
+    if status != 201 {
+        return Err(api_failure("uploading the share", status, &body));
+    }
+    let created: CreatedShare = serde_json::from_slice(&body).context("the server's answer")?;
+    let link = ShareLink { page, id: created.id, key, time: None };
+    println!("{link}");
+    eprintln!("shared {what} ({} bytes sealed), expires {}", sealed.len(), created.expires_at);
+    eprintln!("delete token (keep it to delete the share): {}", created.delete_token);
+    Ok(())
+}
+
+/// A folder written by `share get`, packed again (without its recording unless wanted).
+fn reshare(folder: &std::path::Path, include_recording: bool) -> Result<(Vec<u8>, String)> {
+    let read = |name: &str| {
+        let path = folder.join(name);
+        std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))
+    };
+    let manifest: egoexo_share::ShareManifest = serde_json::from_slice(&read(container::MANIFEST_FILE)?)
+        .with_context(|| format!("{}/{}", folder.display(), container::MANIFEST_FILE))?;
+    let motion: egoexo_core::SmplMotion = serde_json::from_slice(&read(container::MOTION_FILE)?)
+        .with_context(|| format!("{}/{}", folder.display(), container::MOTION_FILE))?;
+    let recording = folder.join(container::SESSION_FILE);
+    let session_egoexo =
+        if include_recording && recording.is_file() { Some(read(container::SESSION_FILE)?) } else { None };
+    let what = format!(
+        "`{}` again ({}{})",
+        manifest.name,
+        manifest.summary.method,
+        if session_egoexo.is_some() { ", with the recording" } else { "" }
+    );
+    let contents =
+        egoexo_share::ShareContents { manifest, scene_json: read(container::SCENE_FILE)?, motion, session_egoexo };
+    Ok((egoexo_share::pack(&contents)?, what))
+}
+
+/// Reconstructs a session as the page does and packs it.
+fn reconstruct_and_pack(session: &std::path::Path, args: &CreateArgs) -> Result<(Vec<u8>, String)> {
     let mut worker = SessionWorker::new();
     let dir = models_dir(args.models.as_deref());
     let manifest = std::fs::read(dir.join("manifest.json"))
@@ -107,7 +157,7 @@ fn run_create(session: PathBuf, args: CreateArgs) -> Result<()> {
             message: e.to_string(),
         })
     })?;
-    let imported = args.import.import(&session)?;
+    let imported = args.import.import(session)?;
     for warning in &imported.warnings {
         eprintln!("warning: {warning}");
     }
@@ -125,29 +175,14 @@ fn run_create(session: PathBuf, args: CreateArgs) -> Result<()> {
     bar.finish_and_clear();
 
     let container = worker.pack_share(!args.no_recording, CREATED_BY)?;
-    let key = egoexo_share::link::random_key()?;
-    let sealed = envelope::seal(&key, &envelope::random_iv()?, &container)?;
-    let url = format!("{}api/shares?expires={}", page, args.expires.as_str());
-    let mut response = agent().post(&url).send(&sealed[..]).with_context(|| format!("cannot reach {url}"))?;
-    let status = response.status().as_u16();
-    let body = response.body_mut().read_to_vec()?;
-    if status != 201 {
-        return Err(api_failure("uploading the share", status, &body));
-    }
-    let created: CreatedShare = serde_json::from_slice(&body).context("the server's answer")?;
-    let link = ShareLink { page, id: created.id, key, time: None };
-    println!("{link}");
-    eprintln!(
-        "shared `{}` ({} frames, {}; {} bytes sealed{}), expires {}",
+    let what = format!(
+        "`{}` ({} frames, {}{})",
         session.name,
         summary.frames,
         summary.method,
-        sealed.len(),
-        if args.no_recording { "" } else { ", with the recording" },
-        created.expires_at
+        if args.no_recording { "" } else { ", with the recording" }
     );
-    eprintln!("delete token (keep it to delete the share): {}", created.delete_token);
-    Ok(())
+    Ok((container, what))
 }
 
 fn run_get(args: GetArgs) -> Result<()> {

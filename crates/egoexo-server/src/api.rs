@@ -197,17 +197,18 @@ pub async fn create_share(
     Ok((StatusCode::CREATED, [(header::CACHE_CONTROL, "no-store")], Json(created)).into_response())
 }
 
-/// `GET /api/shares/{id}`: the sealed bytes.
+/// `GET /api/shares/{id}`: the sealed bytes, streamed from the store.
 pub async fn get_share(State(state): State<Arc<ApiState>>, Path(id): Path<String>) -> Result<Response, Failure> {
     let id = parse_id(&id)?;
-    let bytes = state.store.get(&id, now_s()).await?;
+    let (size, stream) = state.store.get_stream(&id, now_s()).await?;
     Ok((
         [
             (header::CONTENT_TYPE, HeaderValue::from_static("application/octet-stream")),
+            (header::CONTENT_LENGTH, HeaderValue::from(size)),
             // The link is the secret; caches between the client and the server need not keep it.
             (header::CACHE_CONTROL, HeaderValue::from_static("private, no-store")),
         ],
-        bytes,
+        Body::from_stream(stream),
     )
         .into_response())
 }

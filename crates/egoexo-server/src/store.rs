@@ -137,12 +137,24 @@ impl ShareStore {
 
     /// The sealed bytes of a live share.
     pub async fn get(&self, id: &ShareId, now: u64) -> Result<Bytes, StoreError> {
+        let (_, stream) = self.get_stream(id, now).await?;
+        let chunks: Vec<Bytes> = stream.try_collect().await?;
+        Ok(chunks.concat().into())
+    }
+
+    /// The size and a stream of the sealed bytes of a live share (the server answers with it,
+    /// so a download holds no more than a chunk in memory).
+    pub async fn get_stream(
+        &self,
+        id: &ShareId,
+        now: u64,
+    ) -> Result<(u64, futures::stream::BoxStream<'static, object_store::Result<Bytes>>), StoreError> {
         let record = self.record(id).await?;
         if record.data_removed || now >= record.expires_at {
             return Err(StoreError::Expired(id.clone()));
         }
         match self.store.get(&self.data_path(id)).await {
-            Ok(got) => Ok(got.bytes().await?),
+            Ok(got) => Ok((got.meta.size, got.into_stream())),
             // Deleted between the two reads.
             Err(object_store::Error::NotFound { .. }) => Err(StoreError::NotFound(id.clone())),
             Err(e) => Err(e.into()),
@@ -199,9 +211,10 @@ impl ShareStore {
         Ok(report)
     }
 
-    /// Runs [`ShareStore::sweep`] every `interval`, forever (logging failures).
+    /// Runs [`ShareStore::sweep`] every `interval` (the first one interval after the start),
+    /// forever, logging failures.
     pub async fn sweep_every(self, interval: Duration) {
-        let mut ticks = tokio::time::interval(interval);
+        let mut ticks = tokio::time::interval_at(tokio::time::Instant::now() + interval, interval);
         loop {
             ticks.tick().await;
             match self.sweep(now_s()).await {

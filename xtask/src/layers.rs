@@ -6,14 +6,14 @@
 /// `(crate, the egoexo crates it may depend on)`, bottom up — the table in ARCHITECTURE.md.
 pub const LAYERS: &[(&str, &[&str])] = &[
     ("egoexo-core", &[]),
-    ("egoexo-protocol", &[]),
+    ("egoexo-protocol", &["egoexo-core"]),
     ("egoexo-test-support", &[]),
     ("egoexo-motion-io", &["egoexo-core"]),
     ("egoexo-scene", &["egoexo-core"]),
     ("egoexo-infer", &["egoexo-core"]),
     ("egoexo-session", &["egoexo-core", "egoexo-motion-io"]),
     ("egoexo-mocap", &["egoexo-core", "egoexo-motion-io"]),
-    ("egoexo-server", &["egoexo-protocol"]),
+    ("egoexo-server", &["egoexo-core", "egoexo-protocol"]),
     ("egoexo-synth", &["egoexo-core", "egoexo-session"]),
     ("egoexo-share", &["egoexo-core", "egoexo-motion-io", "egoexo-protocol", "egoexo-session"]),
     (

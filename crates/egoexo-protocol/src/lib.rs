@@ -6,6 +6,9 @@
 //! - [`share`] — the share API between the page (or the CLI) and the server
 //!   (`docs/share-format.md`): share ids, expiries, answers and error kinds. Version
 //!   [`share::SHARE_API_VERSION`].
+//! - [`live`] — the live protocol between devices, the relay and viewers
+//!   (`docs/live-protocol.md`): JSON control messages and compact binary data frames over the
+//!   WebSocket subprotocol [`live::LIVE_SUBPROTOCOL`].
 //!
 //! Every message is plain serde data. Byte buffers are a type parameter `B`: natively (and in
 //! tests) [`serde_bytes::ByteBuf`]; in the browser [`JsBytes`], the JS `Uint8Array` itself, so
@@ -15,6 +18,7 @@
 
 #[cfg(target_arch = "wasm32")]
 pub mod js;
+pub mod live;
 pub mod share;
 pub mod worker;
 

@@ -121,12 +121,12 @@ fn parse_id(text: &str) -> Result<ShareId, Failure> {
 
 /// The client's address: the connection's peer, or (when trusted) the first
 /// `X-Forwarded-For` entry.
-fn client_ip(limits: &ApiLimits, peer: SocketAddr, headers: &HeaderMap) -> IpAddr {
+pub(crate) fn client_ip(trust_forwarded_for: bool, peer: SocketAddr, headers: &HeaderMap) -> IpAddr {
     let forwarded = || {
         let first = headers.get("x-forwarded-for")?.to_str().ok()?.split(',').next()?;
         first.trim().parse().ok()
     };
-    if limits.trust_forwarded_for { forwarded().unwrap_or(peer.ip()) } else { peer.ip() }
+    if trust_forwarded_for { forwarded().unwrap_or(peer.ip()) } else { peer.ip() }
 }
 
 /// `POST /api/shares` query.
@@ -160,7 +160,7 @@ pub async fn create_share(
         // Far too large to read and discard: answer at once (the connection closes).
         return Err(too_large(format!("{length} bytes")));
     }
-    let ip = client_ip(limits, peer, &headers);
+    let ip = client_ip(limits.trust_forwarded_for, peer, &headers);
     if state.rate.check_key(&ip).is_err() {
         return Err(Failure(
             ApiErrorKind::RateLimited,

@@ -6,11 +6,12 @@
 //!   sees ciphertext only), `/api/config`; size, time, rate and concurrency limits.
 //! - [`store`] — the shares in an `object_store` backend: a local directory (the default) or
 //!   an S3-compatible bucket (`s3://bucket/prefix`), atomic writes, an expiry sweep.
-//!
-//! Room is left for the live relay (`/live`, the next issue) on the same router.
+//! - [`live`] — the live relay: `/api/live/rooms` and the `/live` WebSocket that devices
+//!   publish into and viewers watch.
 
 pub mod api;
 pub mod hosting;
+pub mod live;
 pub mod store;
 
 use std::net::SocketAddr;
@@ -29,6 +30,7 @@ use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::services::ServeDir;
 
 pub use api::ApiLimits;
+pub use live::{LiveLimits, LiveState};
 pub use store::ShareStore;
 
 /// Everything `egoexo serve` takes.
@@ -42,6 +44,7 @@ pub struct ServerOptions {
     /// Address to listen on (`127.0.0.1:0` picks a free port).
     pub listen: SocketAddr,
     pub limits: ApiLimits,
+    pub live_limits: LiveLimits,
     /// Origins (`https://app.example.org`) whose pages may call the API from another origin.
     pub cors_origins: Vec<String>,
     /// How often expired shares are swept.
@@ -71,8 +74,8 @@ pub fn open_store(location: &str) -> Result<ShareStore> {
     Ok(ShareStore::new(Arc::new(store), StorePath::from("")))
 }
 
-/// The whole router: `/api/*` and the page.
-pub fn router(options: &ServerOptions, store: ShareStore) -> Result<(Router, Arc<api::ApiState>)> {
+/// The whole router: `/api/*`, `/live` and the page.
+pub fn router(options: &ServerOptions, store: ShareStore) -> Result<(Router, Arc<api::ApiState>, Arc<LiveState>)> {
     if !options.dist.join("index.html").is_file() {
         bail!(
             "{} has no index.html: build the page first (`cargo xtask dist`, or `cargo xtask serve`, which builds and serves it)",
@@ -80,6 +83,7 @@ pub fn router(options: &ServerOptions, store: ShareStore) -> Result<(Router, Arc
         );
     }
     let state = Arc::new(api::ApiState::new(store, options.limits.clone()));
+    let live = Arc::new(LiveState::new(options.live_limits.clone(), options.limits.trust_forwarded_for));
     let origins: Vec<HeaderValue> = options
         .cors_origins
         .iter()
@@ -90,7 +94,12 @@ pub fn router(options: &ServerOptions, store: ShareStore) -> Result<(Router, Arc
         .allow_methods([Method::GET, Method::POST, Method::DELETE])
         .allow_headers([axum::http::header::AUTHORIZATION, axum::http::header::CONTENT_TYPE])
         .max_age(Duration::from_secs(600));
+    let live_routes = Router::new()
+        .route("/api/live/rooms", axum::routing::post(live::create_room))
+        .route("/live", get(live::live_socket))
+        .with_state(live.clone());
     let api = Router::new()
+        .merge(live_routes)
         .route("/api/shares", axum::routing::post(api::create_share))
         .route("/api/shares/{id}", get(api::get_share).delete(api::delete_share))
         .route("/api/config", get(api::config))
@@ -105,7 +114,7 @@ pub fn router(options: &ServerOptions, store: ShareStore) -> Result<(Router, Arc
         .fallback_service(ServeDir::new(&options.dist).append_index_html_on_directories(true))
         .layer(axum::middleware::from_fn(hosting::security_headers))
         .layer(CompressionLayer::new().gzip(true).br(true));
-    Ok((app, state))
+    Ok((app, state, live))
 }
 
 /// A bound server: its address, and the future that runs it until `shutdown` resolves.
@@ -114,6 +123,7 @@ pub struct Server {
     listener: tokio::net::TcpListener,
     app: Router,
     state: Arc<api::ApiState>,
+    live: Arc<LiveState>,
     sweep_interval: Duration,
 }
 
@@ -127,11 +137,18 @@ impl Server {
     /// Opens the store, builds the router and binds the address.
     pub async fn bind(options: &ServerOptions) -> Result<Server> {
         let store = open_store(&options.store)?;
-        let (app, state) = router(options, store)?;
+        let (app, state, live) = router(options, store)?;
         let listener = tokio::net::TcpListener::bind(options.listen)
             .await
             .with_context(|| format!("cannot listen on {}", options.listen))?;
-        Ok(Server { local_addr: listener.local_addr()?, listener, app, state, sweep_interval: options.sweep_interval })
+        Ok(Server {
+            local_addr: listener.local_addr()?,
+            listener,
+            app,
+            state,
+            live,
+            sweep_interval: options.sweep_interval,
+        })
     }
 
     /// Where shares are stored, in words.
@@ -139,9 +156,22 @@ impl Server {
         self.state.store.describe()
     }
 
-    /// Serves until `shutdown` resolves, sweeping expired shares meanwhile.
+    /// The live relay's state.
+    pub fn live(&self) -> Arc<LiveState> {
+        self.live.clone()
+    }
+
+    /// Serves until `shutdown` resolves, sweeping expired shares and ticking the live rooms
+    /// meanwhile. At shutdown, live clients are closed ("going away") so that the server
+    /// need not wait for their sockets.
     pub async fn run(self, shutdown: impl Future<Output = ()> + Send + 'static) -> Result<()> {
         let sweep = tokio::spawn(self.state.store.clone().sweep_every(self.sweep_interval));
+        let rooms = tokio::spawn(self.live.clone().run());
+        let live = self.live.clone();
+        let shutdown = async move {
+            shutdown.await;
+            live.close_all();
+        };
         let state = self.state.clone();
         let tidy = tokio::spawn(async move {
             let mut ticks = tokio::time::interval(Duration::from_secs(60));
@@ -154,6 +184,7 @@ impl Server {
         let result = axum::serve(self.listener, service).with_graceful_shutdown(shutdown).await;
         sweep.abort();
         tidy.abort();
+        rooms.abort();
         result.context("serving")
     }
 }

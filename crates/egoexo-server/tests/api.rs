@@ -54,6 +54,7 @@ fn start(limits: ApiLimits) -> Running {
         store: store_dir.path().display().to_string(),
         listen: "127.0.0.1:0".parse().unwrap(),
         limits,
+        live_limits: egoexo_server::LiveLimits::default(),
         cors_origins: vec!["https://app.example.org".into()],
         sweep_interval: Duration::from_secs(3600),
     };

@@ -1,11 +1,11 @@
-//! `egoexo serve`: the hosted page and the share API (`egoexo-server`).
+//! `egoexo serve`: the hosted page, the share API and the live relay (`egoexo-server`).
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::{Result, bail};
-use egoexo_server::{ApiLimits, Server, ServerOptions};
+use egoexo_server::{ApiLimits, LiveLimits, Server, ServerOptions};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -39,6 +39,9 @@ pub struct Args {
     /// Take the client address from X-Forwarded-For (only behind a proxy that sets it).
     #[arg(long)]
     pub trust_forwarded_for: bool,
+    /// Live rooms open at once (each lives 12 h, or 30 min with nobody connected).
+    #[arg(long, default_value_t = 256)]
+    pub max_live_rooms: usize,
     /// Seconds between sweeps of expired shares.
     #[arg(long, default_value_t = 600)]
     pub sweep_interval_s: u64,
@@ -60,6 +63,7 @@ pub fn run(args: Args) -> Result<()> {
             trust_forwarded_for: args.trust_forwarded_for,
             ..ApiLimits::default()
         },
+        live_limits: LiveLimits { max_rooms: args.max_live_rooms.max(1), ..LiveLimits::default() },
         cors_origins: args.cors_origins,
         sweep_interval: Duration::from_secs(args.sweep_interval_s.max(1)),
     };

@@ -1,0 +1,585 @@
+//! The live protocol between devices, the relay and viewers: WebSocket subprotocol
+//! [`LIVE_SUBPROTOCOL`] (`docs/live-protocol.md` is the reader's version, for people who write
+//! device bridges).
+//!
+//! - **Control** travels as JSON text frames: [`ClientMessage`] (hello and join, an observer's
+//!   camera calibration, answers to clock pings) and [`RelayMessage`] (welcome, clock pings,
+//!   the room's channels, calibrations, status).
+//! - **Data** travels as compact binary frames ([`DataFrame`]), Foxglove-style:
+//!   `op | flags | channel | timestamp ns | payload`, little-endian. A device numbers its
+//!   channels by [`Stream`] and stamps frames with its own clock; the relay maps every device
+//!   stream to a room-wide channel, moves the timestamp onto the relay clock (the device's
+//!   offset measured by ping/pong) and forwards the frame to viewers.
+//!
+//! Poses are `T_world_device` in session conventions: a Y-up world in metres, head devices in
+//! the CPF frame (+X left, +Y up, +Z forward). Keypoints are COCO-17 pixels in the observer's
+//! RGB image with detector scores.
+
+use egoexo_core::camera::CameraCalibration;
+use egoexo_core::exo_keypoints::{COCO17_COUNT, Keypoint2d};
+use egoexo_core::glam::{Quat, Vec2, Vec3};
+use egoexo_core::rigid::RigidTransform;
+use serde::{Deserialize, Serialize};
+
+/// The WebSocket subprotocol a client must offer.
+pub const LIVE_SUBPROTOCOL: &str = "egoexo-live.1";
+/// The protocol's version (in `hello` and `welcome`).
+pub const LIVE_PROTOCOL_VERSION: u32 = 1;
+/// How much of every channel a viewer joining late receives at once: 96 frames at 30 fps, so
+/// it can reconstruct a whole window straight away.
+pub const HISTORY_S: f64 = 3.2;
+/// Largest message a client may send, bytes.
+pub const MAX_MESSAGE_BYTES: usize = 64 << 10;
+
+/// A room's id: 22 characters of base64url (128 random bits).
+pub type RoomId = String;
+
+/// What a device publishes on a stream (its device-local channel number).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Stream {
+    /// The device's head pose (a wearer's glasses or headset, or an observer's glasses).
+    Head,
+    /// The wearer's left wrist (a controller grip, a hand-tracked wrist, a wristband).
+    LeftWrist,
+    /// The wearer's right wrist.
+    RightWrist,
+    /// An observer's COCO-17 keypoints of the wearer.
+    Keypoints,
+}
+
+impl Stream {
+    pub const ALL: [Stream; 4] = [Stream::Head, Stream::LeftWrist, Stream::RightWrist, Stream::Keypoints];
+
+    /// The device-local channel number.
+    pub fn channel(self) -> u16 {
+        match self {
+            Stream::Head => 0,
+            Stream::LeftWrist => 1,
+            Stream::RightWrist => 2,
+            Stream::Keypoints => 3,
+        }
+    }
+
+    pub fn from_channel(channel: u16) -> Option<Stream> {
+        Stream::ALL.into_iter().find(|s| s.channel() == channel)
+    }
+
+    /// The frame kind the stream carries.
+    pub fn op(self) -> FrameOp {
+        match self {
+            Stream::Keypoints => FrameOp::Keypoints,
+            _ => FrameOp::Pose,
+        }
+    }
+}
+
+/// A device's part in the capture.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DeviceRole {
+    /// The person reconstructed: head, and maybe wrists.
+    Wearer,
+    /// A person whose camera sees the wearer: head and keypoints.
+    Observer,
+}
+
+impl DeviceRole {
+    /// The streams this role may publish.
+    pub fn allows(self, stream: Stream) -> bool {
+        match self {
+            DeviceRole::Wearer => stream != Stream::Keypoints,
+            DeviceRole::Observer => matches!(stream, Stream::Head | Stream::Keypoints),
+        }
+    }
+}
+
+/// How a client proves it may be in a room.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Join {
+    /// The room and its device or viewer secret (from a link).
+    Secret { room: RoomId, secret: String },
+    /// The short device code a person types on a headset.
+    Code { code: String },
+}
+
+/// A device introducing itself.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct DeviceHello {
+    /// Unique in the room: `wearer`, `observer-1`, … (1–64 of `A–Z a–z 0–9 . _ -`).
+    pub id: String,
+    pub role: DeviceRole,
+    /// What it will publish.
+    pub streams: Vec<Stream>,
+}
+
+/// Client → relay (JSON text frames).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "kebab-case")]
+pub enum ClientMessage {
+    /// The first message: protocol version, the room to join, and for a device, what it is.
+    /// Without `device` the client is a viewer.
+    Hello { protocol: u32, join: Join, device: Option<DeviceHello> },
+    /// An observer's RGB camera (intrinsics, image size, `T_device_camera` in CPF).
+    Calibration { camera: CameraCalibration },
+    /// The answer to a relay [`RelayMessage::Ping`]: the relay's time echoed, and the device's
+    /// clock when it answered.
+    Pong { relay_ns: i64, device_ns: i64 },
+}
+
+/// One channel of the room, as viewers see it.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ChannelInfo {
+    /// The room-wide channel number in frames sent to viewers.
+    pub channel: u16,
+    pub device: String,
+    pub role: DeviceRole,
+    pub stream: Stream,
+}
+
+/// A device, as the relay sees it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DeviceStatus {
+    pub device: String,
+    pub role: DeviceRole,
+    pub connected: bool,
+    /// Frames per second received over the last status interval, per stream.
+    pub rates_hz: Vec<(Stream, f64)>,
+    /// Relay clock minus device clock, nanoseconds (from the ping/pong with the smallest
+    /// round trip among the recent ones); `None` until the device has answered a ping.
+    pub clock_offset_ns: Option<i64>,
+    /// Half that round trip: the offset's uncertainty, nanoseconds.
+    pub clock_uncertainty_ns: Option<i64>,
+    /// Times the device's clock jumped (its offset changed by more than the uncertainty).
+    pub clock_jumps: u32,
+    /// Median of (arrival at the relay − device timestamp on the relay clock) over the last
+    /// status interval: the network's one-way latency, nanoseconds.
+    pub latency_ns: Option<i64>,
+    /// Frames received in all.
+    pub frames: u64,
+}
+
+/// Relay → client (JSON text frames).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "kebab-case")]
+pub enum RelayMessage {
+    /// The hello was accepted.
+    Welcome { protocol: u32, room: RoomId, client: u32, relay_ns: i64, expires_at: String },
+    /// Answer with `pong`: the relay measures the client's clock offset.
+    Ping { relay_ns: i64 },
+    /// The room's channels (sent to viewers whenever they change).
+    Channels { channels: Vec<ChannelInfo> },
+    /// A device's camera (sent to viewers).
+    Calibration { device: String, camera: CameraCalibration },
+    /// The room, once a second (to viewers): its devices, how many viewers, the frames this
+    /// viewer missed because it read too slowly, and this viewer's own clock offset.
+    Status {
+        devices: Vec<DeviceStatus>,
+        viewers: usize,
+        dropped: u64,
+        relay_ns: i64,
+        /// Relay clock minus this viewer's clock, nanoseconds (`None` before its first pong).
+        clock_offset_ns: Option<i64>,
+        clock_uncertainty_ns: Option<i64>,
+    },
+}
+
+/// Why the relay closed a connection: the WebSocket close code, with a sentence as the reason.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum CloseKind {
+    /// 1001: the server is shutting down.
+    GoingAway,
+    /// 1007: a message that is not what the protocol says (bad JSON, a malformed frame).
+    Malformed,
+    /// 1008: a message the client's role may not send (a viewer publishing, a stream not
+    /// announced, keypoints from a wearer).
+    NotAllowed,
+    /// 1009: a message over [`MAX_MESSAGE_BYTES`].
+    TooBig,
+    /// 4000: a hello for another protocol version, or no hello first.
+    BadHello,
+    /// 4001: no such room, a wrong secret or code.
+    NotAdmitted,
+    /// 4002: the room expired or was closed.
+    RoomClosed,
+    /// 4003: the same device id connected again; the newer connection wins.
+    Replaced,
+    /// 4004: the room holds as many devices, viewers or channels as it may.
+    RoomFull,
+    /// 4005: too many messages or join attempts.
+    RateLimited,
+    /// 4006: no hello, no pong or no reading for too long.
+    TimedOut,
+}
+
+impl CloseKind {
+    pub const ALL: [CloseKind; 11] = [
+        CloseKind::GoingAway,
+        CloseKind::Malformed,
+        CloseKind::NotAllowed,
+        CloseKind::TooBig,
+        CloseKind::BadHello,
+        CloseKind::NotAdmitted,
+        CloseKind::RoomClosed,
+        CloseKind::Replaced,
+        CloseKind::RoomFull,
+        CloseKind::RateLimited,
+        CloseKind::TimedOut,
+    ];
+
+    /// The WebSocket close code.
+    pub fn code(self) -> u16 {
+        match self {
+            CloseKind::GoingAway => 1001,
+            CloseKind::Malformed => 1007,
+            CloseKind::NotAllowed => 1008,
+            CloseKind::TooBig => 1009,
+            CloseKind::BadHello => 4000,
+            CloseKind::NotAdmitted => 4001,
+            CloseKind::RoomClosed => 4002,
+            CloseKind::Replaced => 4003,
+            CloseKind::RoomFull => 4004,
+            CloseKind::RateLimited => 4005,
+            CloseKind::TimedOut => 4006,
+        }
+    }
+
+    pub fn from_code(code: u16) -> Option<CloseKind> {
+        CloseKind::ALL.into_iter().find(|k| k.code() == code)
+    }
+
+    /// Whether a client should reconnect after it (devices do after network trouble and
+    /// shutdowns, never after being refused).
+    pub fn may_retry(self) -> bool {
+        matches!(self, CloseKind::GoingAway | CloseKind::TimedOut)
+    }
+}
+
+/// A close: its kind and a sentence for people (at most 123 bytes, WebSocket's limit).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Close {
+    pub kind: CloseKind,
+    pub reason: String,
+}
+
+impl Close {
+    /// A close with `reason` cut to 123 bytes on a character boundary.
+    pub fn new(kind: CloseKind, reason: impl Into<String>) -> Close {
+        let mut reason = reason.into();
+        if reason.len() > 123 {
+            let mut end = 120;
+            while !reason.is_char_boundary(end) {
+                end -= 1;
+            }
+            reason.truncate(end);
+            reason.push('…');
+        }
+        Close { kind, reason }
+    }
+}
+
+/// Kinds of binary frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FrameOp {
+    /// A pose: valid flag, translation, rotation.
+    Pose,
+    /// COCO-17 keypoints: pixel and score each.
+    Keypoints,
+}
+
+impl FrameOp {
+    fn byte(self) -> u8 {
+        match self {
+            FrameOp::Pose => 1,
+            FrameOp::Keypoints => 2,
+        }
+    }
+}
+
+/// A frame's content.
+// A frame lives for one decode or encode; boxing the keypoints would cost an allocation each.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FramePayload {
+    /// `T_world_device`, or `None` when the device lost tracking (sent as invalid).
+    Pose(Option<RigidTransform>),
+    /// COCO-17 keypoints; `None` for one not detected (score 0).
+    Keypoints([Option<Keypoint2d>; COCO17_COUNT]),
+}
+
+impl FramePayload {
+    pub fn op(&self) -> FrameOp {
+        match self {
+            FramePayload::Pose(_) => FrameOp::Pose,
+            FramePayload::Keypoints(_) => FrameOp::Keypoints,
+        }
+    }
+}
+
+/// A binary data frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DataFrame {
+    /// Device → relay: the device-local channel ([`Stream::channel`]); relay → viewer: the
+    /// room-wide channel ([`ChannelInfo::channel`]).
+    pub channel: u16,
+    /// Device → relay: the device's clock; relay → viewer: the relay's clock. Nanoseconds.
+    pub timestamp_ns: i64,
+    pub payload: FramePayload,
+}
+
+/// Bytes of the header: op, flags, channel, timestamp.
+pub const HEADER_BYTES: usize = 12;
+/// Bytes of a pose payload: valid, 3 × f32 translation, 4 × f32 quaternion (x, y, z, w).
+pub const POSE_BYTES: usize = 1 + 7 * 4;
+/// Bytes of a keypoints payload: count (17), then 17 × (x, y, score) f32.
+pub const KEYPOINTS_BYTES: usize = 1 + COCO17_COUNT * 12;
+
+/// Why a binary frame was refused.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum FrameError {
+    #[error("a frame has a {HEADER_BYTES}-byte header; got {0} bytes")]
+    Short(usize),
+    #[error("flags must be 0, got {0}")]
+    Flags(u8),
+    #[error("unknown frame op {0} (1: pose, 2: keypoints)")]
+    UnknownOp(u8),
+    #[error("a {op} frame has {expected} payload bytes; got {got}")]
+    PayloadLength { op: &'static str, expected: usize, got: usize },
+    #[error("a keypoints frame starts with its count, 17; got {0}")]
+    KeypointCount(u8),
+    #[error("a {0} frame holds a number that is not finite")]
+    NotFinite(&'static str),
+    #[error("the pose's valid flag must be 0 or 1, got {0}")]
+    ValidFlag(u8),
+    #[error("the pose's quaternion has length {0}, not 1")]
+    NotUnitQuaternion(f32),
+    #[error("keypoint {index}'s score must be in [0, 1], got {score}")]
+    Score { index: usize, score: f32 },
+}
+
+impl DataFrame {
+    /// The frame's bytes.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(HEADER_BYTES + KEYPOINTS_BYTES);
+        out.push(self.payload.op().byte());
+        out.push(0);
+        out.extend_from_slice(&self.channel.to_le_bytes());
+        out.extend_from_slice(&self.timestamp_ns.to_le_bytes());
+        match &self.payload {
+            FramePayload::Pose(pose) => {
+                let p = pose.unwrap_or(RigidTransform::IDENTITY);
+                out.push(u8::from(pose.is_some()));
+                for v in p.translation.to_array().into_iter().chain(p.rotation.to_array()) {
+                    out.extend_from_slice(&v.to_le_bytes());
+                }
+            }
+            FramePayload::Keypoints(keypoints) => {
+                out.push(COCO17_COUNT as u8);
+                for k in keypoints {
+                    let (x, y, score) = k.map_or((0.0, 0.0, 0.0), |k| (k.pixel.x, k.pixel.y, k.score));
+                    for v in [x, y, score] {
+                        out.extend_from_slice(&v.to_le_bytes());
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Reads a frame, refusing anything but exactly the layout (lengths, finite numbers, a
+    /// unit quaternion within 1e-3, scores in [0, 1]).
+    pub fn decode(bytes: &[u8]) -> Result<DataFrame, FrameError> {
+        let Some((header, body)) = bytes.split_first_chunk::<HEADER_BYTES>() else {
+            return Err(FrameError::Short(bytes.len()));
+        };
+        let channel = u16::from_le_bytes([header[2], header[3]]);
+        let mut ts = [0u8; 8];
+        ts.copy_from_slice(&header[4..12]);
+        let timestamp_ns = i64::from_le_bytes(ts);
+        if header[1] != 0 {
+            return Err(FrameError::Flags(header[1]));
+        }
+        let floats = |b: &[u8]| -> Vec<f32> {
+            b.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
+        };
+        let payload = match header[0] {
+            1 => {
+                if body.len() != POSE_BYTES {
+                    return Err(FrameError::PayloadLength { op: "pose", expected: POSE_BYTES, got: body.len() });
+                }
+                let v = floats(&body[1..]);
+                if v.iter().any(|x| !x.is_finite()) {
+                    return Err(FrameError::NotFinite("pose"));
+                }
+                let valid = match body[0] {
+                    0 => false,
+                    1 => true,
+                    other => return Err(FrameError::ValidFlag(other)),
+                };
+                let rotation = Quat::from_xyzw(v[3], v[4], v[5], v[6]);
+                if valid && (rotation.length() - 1.0).abs() > 1e-3 {
+                    return Err(FrameError::NotUnitQuaternion(rotation.length()));
+                }
+                FramePayload::Pose(valid.then(|| RigidTransform {
+                    rotation: rotation.normalize(),
+                    translation: Vec3::new(v[0], v[1], v[2]),
+                }))
+            }
+            2 => {
+                if body.len() != KEYPOINTS_BYTES {
+                    return Err(FrameError::PayloadLength {
+                        op: "keypoints",
+                        expected: KEYPOINTS_BYTES,
+                        got: body.len(),
+                    });
+                }
+                if usize::from(body[0]) != COCO17_COUNT {
+                    return Err(FrameError::KeypointCount(body[0]));
+                }
+                let v = floats(&body[1..]);
+                if v.iter().any(|x| !x.is_finite()) {
+                    return Err(FrameError::NotFinite("keypoints"));
+                }
+                let mut keypoints = [None; COCO17_COUNT];
+                for (k, slot) in keypoints.iter_mut().enumerate() {
+                    let (x, y, score) = (v[3 * k], v[3 * k + 1], v[3 * k + 2]);
+                    if !(0.0..=1.0).contains(&score) {
+                        return Err(FrameError::Score { index: k, score });
+                    }
+                    *slot = (score > 0.0).then(|| Keypoint2d { pixel: Vec2::new(x, y), score });
+                }
+                FramePayload::Keypoints(keypoints)
+            }
+            other => return Err(FrameError::UnknownOp(other)),
+        };
+        Ok(DataFrame { channel, timestamp_ns, payload })
+    }
+}
+
+/// Checks a device id: 1–64 characters of `A–Z a–z 0–9 . _ -`.
+pub fn valid_device_id(id: &str) -> bool {
+    (1..=64).contains(&id.len()) && id.bytes().all(|b| b.is_ascii_alphanumeric() || matches!(b, b'.' | b'_' | b'-'))
+}
+
+/// What `POST /api/live/rooms` answers.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RoomCreated {
+    pub room: RoomId,
+    /// Lets devices publish (device links carry it).
+    pub device_secret: String,
+    /// Lets viewers watch, never publish (watch links carry it).
+    pub viewer_secret: String,
+    /// The device secret as a code a person can type on a headset (`7KQ-M4T`).
+    pub device_code: String,
+    /// When the room closes, RFC 3339 UTC.
+    pub expires_at: String,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn keypoints() -> [Option<Keypoint2d>; COCO17_COUNT] {
+        std::array::from_fn(|k| {
+            (k % 5 != 0).then(|| Keypoint2d { pixel: Vec2::new(10.0 * k as f32, 700.5), score: 0.8 })
+        })
+    }
+
+    #[test]
+    fn frames_round_trip_in_their_documented_sizes() {
+        let pose = DataFrame {
+            channel: 2,
+            timestamp_ns: -1_234_567_890_123,
+            payload: FramePayload::Pose(Some(RigidTransform {
+                rotation: Quat::from_rotation_y(0.3),
+                translation: Vec3::new(0.1, 1.6, -2.0),
+            })),
+        };
+        let bytes = pose.encode();
+        assert_eq!(bytes.len(), HEADER_BYTES + POSE_BYTES);
+        assert_eq!(&bytes[..4], &[1, 0, 2, 0]);
+        assert_eq!(DataFrame::decode(&bytes).unwrap(), pose);
+        let lost = DataFrame { channel: 0, timestamp_ns: 5, payload: FramePayload::Pose(None) };
+        assert_eq!(DataFrame::decode(&lost.encode()).unwrap(), lost);
+        let seen = DataFrame { channel: 3, timestamp_ns: 9, payload: FramePayload::Keypoints(keypoints()) };
+        let bytes = seen.encode();
+        assert_eq!(bytes.len(), HEADER_BYTES + KEYPOINTS_BYTES);
+        assert_eq!(DataFrame::decode(&bytes).unwrap(), seen);
+    }
+
+    #[test]
+    fn malformed_frames_say_what_is_wrong() {
+        let good =
+            DataFrame { channel: 0, timestamp_ns: 1, payload: FramePayload::Pose(Some(RigidTransform::IDENTITY)) };
+        let bytes = good.encode();
+        let mut cases: Vec<(Vec<u8>, &str)> = vec![
+            (bytes[..5].to_vec(), "header"),
+            (bytes[..20].to_vec(), "payload bytes"),
+            ([bytes.clone(), vec![0]].concat(), "payload bytes"),
+        ];
+        let mut op = bytes.clone();
+        op[0] = 9;
+        cases.push((op, "unknown frame op 9"));
+        let mut flags = bytes.clone();
+        flags[1] = 1;
+        cases.push((flags, "flags"));
+        let mut nan = bytes.clone();
+        nan[HEADER_BYTES + 1..HEADER_BYTES + 5].copy_from_slice(&f32::NAN.to_le_bytes());
+        cases.push((nan, "not finite"));
+        let mut long_quat = bytes.clone();
+        long_quat[HEADER_BYTES + 25..HEADER_BYTES + 29].copy_from_slice(&2.0f32.to_le_bytes());
+        cases.push((long_quat, "length"));
+        let mut kp = DataFrame { channel: 3, timestamp_ns: 1, payload: FramePayload::Keypoints(keypoints()) }.encode();
+        kp[HEADER_BYTES + 9..HEADER_BYTES + 13].copy_from_slice(&1.5f32.to_le_bytes());
+        cases.push((kp, "score"));
+        for (bytes, needle) in cases {
+            let err = DataFrame::decode(&bytes).unwrap_err().to_string();
+            assert!(err.contains(needle), "{needle}: {err}");
+        }
+    }
+
+    /// Every JSON example in `docs/live-protocol.md` is a message of the protocol (or the
+    /// room API's answer), so the document cannot drift from the types.
+    #[test]
+    fn the_documented_examples_parse() {
+        let doc = include_str!("../../../docs/live-protocol.md");
+        let mut examples = 0;
+        for block in doc.split("```json").skip(1) {
+            let json = block.split("```").next().unwrap();
+            let value: serde_json::Value = serde_json::from_str(json).unwrap_or_else(|e| panic!("{e}: {json}"));
+            let parsed = if value.get("type").is_none() {
+                serde_json::from_value::<RoomCreated>(value.clone()).is_ok()
+            } else {
+                serde_json::from_value::<ClientMessage>(value.clone()).is_ok()
+                    || serde_json::from_value::<RelayMessage>(value.clone()).is_ok()
+            };
+            assert!(parsed, "not a message of the protocol: {json}");
+            examples += 1;
+        }
+        assert!(examples >= 6, "{examples} examples");
+    }
+
+    #[test]
+    fn control_messages_have_their_wire_shape() {
+        let hello = ClientMessage::Hello {
+            protocol: LIVE_PROTOCOL_VERSION,
+            join: Join::Code { code: "7KQ-M4T".into() },
+            device: Some(DeviceHello { id: "wearer".into(), role: DeviceRole::Wearer, streams: vec![Stream::Head] }),
+        };
+        let json = serde_json::to_value(&hello).unwrap();
+        assert_eq!(
+            json,
+            serde_json::json!({"type": "hello", "protocol": 1, "join": {"code": "7KQ-M4T"},
+                "device": {"id": "wearer", "role": "wearer", "streams": ["head"]}})
+        );
+        assert_eq!(serde_json::from_value::<ClientMessage>(json).unwrap(), hello);
+        let viewer: ClientMessage =
+            serde_json::from_str(r#"{"type":"hello","protocol":1,"join":{"room":"r","secret":"s"},"device":null}"#)
+                .unwrap();
+        assert!(matches!(viewer, ClientMessage::Hello { device: None, join: Join::Secret { .. }, .. }));
+        assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"publish"}"#).is_err());
+        assert!(DeviceRole::Observer.allows(Stream::Keypoints) && !DeviceRole::Wearer.allows(Stream::Keypoints));
+        assert!(valid_device_id("observer-1") && !valid_device_id("<b>") && !valid_device_id(""));
+    }
+}

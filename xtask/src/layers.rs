@@ -11,7 +11,7 @@ pub const LAYERS: &[(&str, &[&str])] = &[
     ("egoexo-motion-io", &["egoexo-core"]),
     ("egoexo-scene", &["egoexo-core"]),
     ("egoexo-infer", &["egoexo-core"]),
-    ("egoexo-session", &["egoexo-core", "egoexo-motion-io"]),
+    ("egoexo-session", &["egoexo-core", "egoexo-protocol", "egoexo-motion-io"]),
     ("egoexo-mocap", &["egoexo-core", "egoexo-motion-io"]),
     ("egoexo-server", &["egoexo-core", "egoexo-protocol"]),
     ("egoexo-synth", &["egoexo-core", "egoexo-session"]),

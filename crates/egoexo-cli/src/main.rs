@@ -36,6 +36,8 @@ enum Command {
     Serve(commands::serve::Args),
     /// Share a session's reconstruction by link (end-to-end encrypted), or `share get` one.
     Share(commands::share::Args),
+    /// Live capture: create a room, replay a session as live devices, record a take, load-test the relay.
+    Live(commands::live::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -49,6 +51,7 @@ fn main() -> std::process::ExitCode {
         Command::Reconstruct(args) => commands::reconstruct::run(args),
         Command::Serve(args) => commands::serve::run(args),
         Command::Share(args) => commands::share::run(args),
+        Command::Live(args) => commands::live::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

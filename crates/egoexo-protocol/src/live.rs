@@ -462,6 +462,24 @@ pub fn valid_device_id(id: &str) -> bool {
     (1..=64).contains(&id.len()) && id.bytes().all(|b| b.is_ascii_alphanumeric() || matches!(b, b'.' | b'_' | b'-'))
 }
 
+/// The characters of device codes: no 0/O, 1/I/L to misread.
+pub const CODE_ALPHABET: &[u8] = b"23456789ABCDEFGHJKMNPQRSTUVWXYZ";
+/// Characters in a device code (31⁶ ≈ 8.9 × 10⁸ codes).
+pub const CODE_LENGTH: usize = 6;
+
+/// A typed code in canonical form (upper case, no dash or spaces), if it could be one.
+pub fn normalize_code(code: &str) -> Option<String> {
+    let code: String =
+        code.chars().filter(|c| !matches!(c, '-' | ' ' | '\u{2010}'..='\u{2015}')).collect::<String>().to_uppercase();
+    (code.len() == CODE_LENGTH && code.bytes().all(|b| CODE_ALPHABET.contains(&b))).then_some(code)
+}
+
+/// A code as shown: `7KQ-M4T`.
+pub fn display_code(code: &str) -> String {
+    let half = code.len() / 2;
+    format!("{}-{}", &code[..half], &code[half..])
+}
+
 /// What `POST /api/live/rooms` answers.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct RoomCreated {
@@ -474,6 +492,42 @@ pub struct RoomCreated {
     pub device_code: String,
     /// When the room closes, RFC 3339 UTC.
     pub expires_at: String,
+}
+
+/// A room and one of its secrets, as page links carry them: `#live=<room>.<secret>` in the
+/// address's fragment (never sent to the server). With the viewer secret it is a watch link
+/// (`https://host/#live=…`); with the device secret a device link (`https://host/xr.html#live=…`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LiveLink {
+    pub room: RoomId,
+    pub secret: String,
+}
+
+impl LiveLink {
+    /// `live=<room>.<secret>`.
+    pub fn fragment(&self) -> String {
+        format!("live={}.{}", self.room, self.secret)
+    }
+
+    /// Finds `live=<room>.<secret>` in a fragment (`#` optional; other `&`-separated
+    /// parameters are ignored). Room and secret are base64url, 1–64 characters each.
+    pub fn parse_fragment(fragment: &str) -> Option<LiveLink> {
+        let fragment = fragment.strip_prefix('#').unwrap_or(fragment);
+        let value = fragment.split('&').find_map(|part| part.strip_prefix("live="))?;
+        let (room, secret) = value.split_once('.')?;
+        let ok = |s: &str| {
+            (1..=64).contains(&s.len()) && s.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
+        };
+        (ok(room) && ok(secret)).then(|| LiveLink { room: room.to_string(), secret: secret.to_string() })
+    }
+
+    /// The link in a full address (`https://host/#live=…`), or a bare `<room>.<secret>`.
+    pub fn parse(text: &str) -> Option<LiveLink> {
+        match text.split_once('#') {
+            Some((_, fragment)) => Self::parse_fragment(fragment),
+            None => Self::parse_fragment(&format!("live={text}")),
+        }
+    }
 }
 
 #[cfg(test)]
@@ -537,6 +591,27 @@ mod tests {
             let err = DataFrame::decode(&bytes).unwrap_err().to_string();
             assert!(err.contains(needle), "{needle}: {err}");
         }
+    }
+
+    #[test]
+    fn links_carry_the_room_and_secret_in_the_fragment() {
+        let link = LiveLink { room: "Ab-_9".into(), secret: "s3cr3t".into() };
+        assert_eq!(link.fragment(), "live=Ab-_9.s3cr3t");
+        assert_eq!(LiveLink::parse("https://h/#t=3&live=Ab-_9.s3cr3t"), Some(link.clone()));
+        assert_eq!(LiveLink::parse("Ab-_9.s3cr3t"), Some(link));
+        for bad in ["https://h/#live=a", "#live=.x", "#live=a.b<c", "7KQ-M4T", "https://h/?live=a.b"] {
+            assert_eq!(LiveLink::parse(bad), None, "{bad}");
+        }
+    }
+
+    #[test]
+    fn device_codes_forgive_case_spaces_and_dashes_but_not_misreadable_characters() {
+        assert_eq!(normalize_code("7kq m4t").as_deref(), Some("7KQM4T"));
+        assert_eq!(normalize_code("7KQ\u{2013}M4T").as_deref(), Some("7KQM4T"));
+        for bad in ["7KQ-M40", "7KQ-M4", "7KQ-M4TT", "", "ÄKQ-M4T"] {
+            assert_eq!(normalize_code(bad), None, "{bad}");
+        }
+        assert_eq!(display_code("7KQM4T"), "7KQ-M4T");
     }
 
     /// Every JSON example in `docs/live-protocol.md` is a message of the protocol (or the

@@ -236,8 +236,9 @@ fn nearest(timestamps: &[i64], t: i64, tolerance: i64) -> Option<usize> {
 }
 
 /// Samples a trajectory at `times` (sorted): interpolation between the bracketing samples when
-/// they are at most `max_gap_ns` apart, an exact sample when a time coincides with one.
-fn resample_trajectory(trajectory: &Trajectory, times: &[i64], max_gap_ns: i64) -> AlignedTrajectory {
+/// they are at most `max_gap_ns` apart, an exact sample when a time coincides with one. (Also
+/// how `egoexo live replay` puts a recorded trajectory at a headset's rate.)
+pub fn resample_trajectory(trajectory: &Trajectory, times: &[i64], max_gap_ns: i64) -> AlignedTrajectory {
     let ts = &trajectory.timestamps_ns;
     let mut poses = Vec::with_capacity(times.len());
     let mut valid = Vec::with_capacity(times.len());

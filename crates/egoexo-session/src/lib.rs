@@ -8,6 +8,7 @@
 //! - [`format`](mod@format) — the native `.egoexo` format: reader and writer (`docs/session-format.md`).
 //! - [`aria`] — Aria conventions and MPS files (`closed_loop_trajectory.csv`,
 //!   `online_calibration.jsonl`, `time_sync.csv`).
+//! - [`live`] — a live take: frames received from the relay gathered into a session.
 //! - [`keypoints`] — exo keypoint files: JSON lines (read/write) and COCO JSON (read).
 //! - [`npz`] — checked `.npz` reading (writing is `egoexo_motion_io::npz`).
 //! - [`vfs`] — [`vfs::FileTree`]: in-memory files, zip archives, and (native) folders.
@@ -26,6 +27,7 @@ pub mod format;
 pub mod import;
 mod json;
 pub mod keypoints;
+pub mod live;
 pub mod model;
 pub mod npz;
 pub mod validate;

@@ -3,6 +3,7 @@
 pub mod convert;
 pub mod eval;
 pub mod inspect;
+pub mod live;
 pub mod mocap;
 pub mod models;
 pub mod reconstruct;

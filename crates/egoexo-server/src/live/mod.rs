@@ -123,23 +123,8 @@ impl LiveLimits {
     }
 }
 
-/// The characters of device codes: no 0/O, 1/I/L to misread.
-pub const CODE_ALPHABET: &[u8] = b"23456789ABCDEFGHJKMNPQRSTUVWXYZ";
-/// Characters in a device code (31⁶ ≈ 8.9 × 10⁸ codes).
-pub const CODE_LENGTH: usize = 6;
-
-/// A typed code in canonical form (upper case, no dash or spaces), if it could be one.
-pub fn normalize_code(code: &str) -> Option<String> {
-    let code: String =
-        code.chars().filter(|c| !matches!(c, '-' | ' ' | '\u{2010}'..='\u{2015}')).collect::<String>().to_uppercase();
-    (code.len() == CODE_LENGTH && code.bytes().all(|b| CODE_ALPHABET.contains(&b))).then_some(code)
-}
-
-/// A code as shown: `7KQ-M4T`.
-pub fn display_code(code: &str) -> String {
-    let half = code.len() / 2;
-    format!("{}-{}", &code[..half], &code[half..])
-}
+// Device codes are part of the protocol (the WebXR page checks what a person typed).
+pub use egoexo_protocol::live::{CODE_ALPHABET, CODE_LENGTH, display_code, normalize_code};
 
 #[derive(Debug, Default)]
 struct Rooms {

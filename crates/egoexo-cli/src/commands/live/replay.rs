@@ -1,0 +1,522 @@
+//! `egoexo live replay <session> --url … --room CODE`: streams a recorded or simulated session
+//! in real time as its devices would, one WebSocket per device (the wearer; each observer with
+//! its camera and keypoints). Each device has its own clock (a random offset and drift from
+//! the relay's) and its frames leave with network jitter; faults (a device leaving and coming
+//! back, a clock that jumps) can be injected. The demo source and the load generator.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context, Result, bail};
+use egoexo_core::camera::CameraCalibration;
+use egoexo_protocol::live::{
+    ClientMessage, DataFrame, DeviceHello, DeviceRole, FramePayload, Join, LIVE_PROTOCOL_VERSION, LiveLink,
+    RelayMessage, Stream,
+};
+use egoexo_session::align::resample_trajectory;
+use egoexo_session::model::{Session, Trajectory};
+use futures::{SinkExt, StreamExt};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+use tokio::time::Instant;
+use tokio_tungstenite::tungstenite::{Bytes, Message};
+
+use super::client::{self, ServerAddress, Socket};
+use crate::commands::session_input::ImportArgs;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The session to stream: a `.egoexo`, an Aria MPS folder, a Nymeria sequence, or a zip.
+    pub session: PathBuf,
+    #[command(flatten)]
+    pub import: ImportArgs,
+    /// The server: http://host:port (its relay is ws://host:port/live) or the relay's ws:// URL.
+    #[arg(long)]
+    pub url: String,
+    /// The room: a device code (7KQ-M4T) or a device link (…#live=<room>.<secret>). Without
+    /// it a room is created and its code and links are printed.
+    #[arg(long)]
+    pub room: Option<String>,
+    /// Playback speed (2 = twice real time).
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// Where in the session to start, seconds after the wearer's first head pose.
+    #[arg(long, default_value_t = 0.0)]
+    pub start_s: f64,
+    /// How much of the session to stream, seconds [default: to its end].
+    #[arg(long)]
+    pub duration_s: Option<f64>,
+    /// Start again at the end, until Ctrl-C.
+    #[arg(long = "loop")]
+    pub repeat: bool,
+    /// Most pose samples a second per stream: faster trajectories (Aria's 1 kHz) are resampled
+    /// to this rate, as a headset streams at 72–90 Hz.
+    #[arg(long, default_value_t = 90.0)]
+    pub max_pose_hz: f64,
+    /// Each device's clock starts at a random offset within ± this many seconds of the
+    /// relay's.
+    #[arg(long, default_value_t = 1000.0)]
+    pub clock_spread_s: f64,
+    /// Each device's clock runs fast or slow by up to this many parts per million.
+    #[arg(long, default_value_t = 50.0)]
+    pub drift_ppm: f64,
+    /// Each frame leaves up to this many milliseconds after its capture (uniform).
+    #[arg(long, default_value_t = 8.0)]
+    pub jitter_ms: f64,
+    /// Seed of the clocks and jitter.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Stream the wearer only.
+    #[arg(long)]
+    pub no_observers: bool,
+    /// A device leaves and comes back: `ID@START+SECONDS` (seconds into the replay); its
+    /// frames meanwhile are not sent. Repeatable.
+    #[arg(long = "disconnect", value_parser = parse_fault, value_name = "ID@AT+S")]
+    pub disconnects: Vec<Fault>,
+    /// A device's clock jumps by ±SECONDS at AT: `ID@AT+SECONDS` or `ID@AT-SECONDS`. Repeatable.
+    #[arg(long = "clock-jump", value_parser = parse_fault, value_name = "ID@AT±S")]
+    pub clock_jumps: Vec<Fault>,
+}
+
+/// A fault for one device at a time into the replay.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fault {
+    pub device: String,
+    pub at_s: f64,
+    pub value_s: f64,
+}
+
+fn parse_fault(text: &str) -> Result<Fault, String> {
+    let expected = || format!("`{text}`: expected ID@AT+SECONDS (e.g. observer-1@2.5+1)");
+    let (device, rest) = text.split_once('@').ok_or_else(expected)?;
+    let sign_at = rest.find(['+', '-']).ok_or_else(expected)?;
+    let at_s: f64 = rest[..sign_at].parse().map_err(|_| expected())?;
+    let value_s: f64 = rest[sign_at..].parse().map_err(|_| expected())?;
+    if device.is_empty() || !at_s.is_finite() || at_s < 0.0 || !value_s.is_finite() {
+        return Err(expected());
+    }
+    Ok(Fault { device: device.to_string(), at_s, value_s })
+}
+
+/// One frame a device will send, at a session time.
+#[derive(Clone, Debug)]
+struct Sample {
+    t_ns: i64,
+    stream: Stream,
+    payload: FramePayload,
+}
+
+/// What one device sends.
+#[derive(Clone, Debug)]
+struct DevicePlan {
+    hello: DeviceHello,
+    camera: Option<CameraCalibration>,
+    samples: Vec<Sample>,
+}
+
+/// A trajectory as a headset streams it: its own samples, or (when faster than `max_hz`)
+/// resampled at `max_hz` with the session's interpolation, invalid where it has gaps.
+fn pose_samples(trajectory: &Trajectory, stream: Stream, max_hz: f64, range: (i64, i64)) -> Vec<Sample> {
+    let Some((first, last)) = trajectory.time_range_ns() else { return Vec::new() };
+    let span_s = (last - first) as f64 / 1e9;
+    let native_hz = if span_s > 0.0 { (trajectory.len() - 1) as f64 / span_s } else { 0.0 };
+    let in_range = |t: i64| (range.0..=range.1).contains(&t);
+    if native_hz <= max_hz * 1.05 {
+        return trajectory
+            .timestamps_ns
+            .iter()
+            .zip(&trajectory.poses)
+            .filter(|(t, _)| in_range(**t))
+            .map(|(&t_ns, pose)| Sample { t_ns, stream, payload: FramePayload::Pose(Some(*pose)) })
+            .collect();
+    }
+    let step = 1e9 / max_hz;
+    let times: Vec<i64> = (0..)
+        .map(|k| first + (k as f64 * step).round() as i64)
+        .take_while(|t| *t <= last)
+        .filter(|t| in_range(*t))
+        .collect();
+    let resampled = resample_trajectory(trajectory, &times, egoexo_session::align::DEFAULT_MAX_GAP_NS);
+    times
+        .iter()
+        .zip(resampled.poses.iter().zip(&resampled.valid))
+        .map(|(&t_ns, (pose, valid))| Sample { t_ns, stream, payload: FramePayload::Pose(valid.then_some(*pose)) })
+        .collect()
+}
+
+fn plan_devices(session: &Session, args: &Args) -> Result<(Vec<DevicePlan>, (i64, i64))> {
+    let (head_first, head_last) =
+        session.wearer.head.time_range_ns().context("the session has no wearer head poses")?;
+    let start = head_first + (args.start_s * 1e9) as i64;
+    let end = match args.duration_s {
+        Some(d) => (start + (d * 1e9) as i64).min(head_last),
+        None => head_last,
+    };
+    if start >= end {
+        bail!("--start-s {} is past the session's end ({:.1} s)", args.start_s, (head_last - head_first) as f64 / 1e9);
+    }
+    let range = (start, end);
+    let mut plans = Vec::new();
+    let mut wearer = Vec::new();
+    let mut streams = vec![Stream::Head];
+    wearer.extend(pose_samples(&session.wearer.head, Stream::Head, args.max_pose_hz, range));
+    for (stream, wrist) in
+        [(Stream::LeftWrist, &session.wearer.left_wrist), (Stream::RightWrist, &session.wearer.right_wrist)]
+    {
+        if let Some(wrist) = wrist {
+            streams.push(stream);
+            wearer.extend(pose_samples(wrist, stream, args.max_pose_hz, range));
+        }
+    }
+    plans.push(DevicePlan {
+        hello: DeviceHello { id: "wearer".into(), role: DeviceRole::Wearer, streams },
+        camera: None,
+        samples: wearer,
+    });
+    if !args.no_observers {
+        for observer in &session.observers {
+            let mut samples = pose_samples(&observer.head, Stream::Head, args.max_pose_hz, range);
+            let mut streams = vec![Stream::Head];
+            if let Some(keypoints) = &observer.keypoints {
+                streams.push(Stream::Keypoints);
+                samples.extend(
+                    keypoints
+                        .timestamps_ns
+                        .iter()
+                        .zip(&keypoints.frames)
+                        .filter(|(t, _)| (start..=end).contains(*t))
+                        .map(|(&t_ns, frame)| Sample {
+                            t_ns,
+                            stream: Stream::Keypoints,
+                            payload: FramePayload::Keypoints(*frame),
+                        }),
+                );
+            }
+            plans.push(DevicePlan {
+                hello: DeviceHello { id: observer.id.clone(), role: DeviceRole::Observer, streams },
+                camera: Some(observer.camera),
+                samples,
+            });
+        }
+    }
+    for plan in &mut plans {
+        plan.samples.sort_by_key(|s| s.t_ns);
+    }
+    for fault in args.disconnects.iter().chain(&args.clock_jumps) {
+        if !plans.iter().any(|p| p.hello.id == fault.device) {
+            let ids: Vec<_> = plans.iter().map(|p| p.hello.id.as_str()).collect();
+            bail!("no device `{}` in this replay (devices: {})", fault.device, ids.join(", "));
+        }
+    }
+    Ok((plans, range))
+}
+
+/// A device's clock: the system clock offset by `base_ns`, running `1 + drift` times as
+/// fast from `origin`, plus the jumps that have happened.
+#[derive(Clone, Debug)]
+struct DeviceClock {
+    origin: Instant,
+    origin_ns: i64,
+    drift: f64,
+    /// `(seconds after origin, jump ns)`.
+    jumps: Vec<(f64, i64)>,
+}
+
+impl DeviceClock {
+    fn at(&self, instant: Instant) -> i64 {
+        // Signed: the clock runs (and is asked, by pings) before the replay starts too.
+        let elapsed = if instant >= self.origin {
+            instant.duration_since(self.origin).as_secs_f64()
+        } else {
+            -self.origin.duration_since(instant).as_secs_f64()
+        };
+        let jumped: i64 = self.jumps.iter().filter(|(at, _)| elapsed >= *at).map(|(_, d)| d).sum();
+        self.origin_ns + (elapsed * 1e9 * (1.0 + self.drift)) as i64 + jumped
+    }
+
+    fn now(&self) -> i64 {
+        self.at(Instant::now())
+    }
+}
+
+/// What one device sent.
+#[derive(Debug, Default, Serialize)]
+pub struct DeviceReport {
+    pub id: String,
+    pub role: String,
+    /// Frames sent per stream (kebab-case names).
+    pub sent: BTreeMap<String, u64>,
+    /// Frames captured while disconnected (not sent).
+    pub not_sent: u64,
+    pub connections: u32,
+    /// Frames in one pass over the session.
+    pub planned: u64,
+    /// The clock's offset from the system clock at the start, ns, and its drift (ppm).
+    pub clock_offset_ns: i64,
+    pub drift_ppm: f64,
+}
+
+/// The replay's summary (printed as one JSON line at the end).
+#[derive(Debug, Serialize)]
+pub struct ReplayReport {
+    pub devices: Vec<DeviceReport>,
+    pub session_span_s: f64,
+}
+
+pub(super) fn stream_name(stream: Stream) -> String {
+    serde_json::to_value(stream).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default()
+}
+
+struct DeviceRun {
+    server: ServerAddress,
+    join: Join,
+    plan: DevicePlan,
+    clock: DeviceClock,
+    /// Replay time 0 (capture of the first sample).
+    start: Instant,
+    range: (i64, i64),
+    speed: f64,
+    repeat: bool,
+    jitter: Duration,
+    rng: ChaCha8Rng,
+    /// `(from, to)` seconds after start.
+    disconnects: Vec<(f64, f64)>,
+}
+
+impl DeviceRun {
+    /// The capture instant of the `n`-th frame to send (over cycles), or `None` past the end.
+    fn capture(&self, n: usize) -> Option<(Instant, &Sample)> {
+        let count = self.plan.samples.len();
+        if count == 0 || (!self.repeat && n >= count) {
+            return None;
+        }
+        let cycle = (n / count) as i64;
+        let sample = &self.plan.samples[n % count];
+        let period = self.range.1 - self.range.0 + 1;
+        let session_ns = cycle * period + sample.t_ns - self.range.0;
+        Some((self.start + Duration::from_secs_f64(session_ns as f64 / 1e9 / self.speed), sample))
+    }
+
+    fn disconnected_at(&self, instant: Instant) -> Option<Instant> {
+        let t = instant.saturating_duration_since(self.start).as_secs_f64();
+        self.disconnects
+            .iter()
+            .find(|(from, to)| (*from..*to).contains(&t))
+            .map(|(_, to)| self.start + Duration::from_secs_f64(*to))
+    }
+
+    async fn connect(&self, report: &mut DeviceReport) -> Result<Socket> {
+        let mut socket = client::connect(&self.server).await?;
+        let hello = ClientMessage::Hello {
+            protocol: LIVE_PROTOCOL_VERSION,
+            join: self.join.clone(),
+            device: Some(self.plan.hello.clone()),
+        };
+        let clock = self.clock.clone();
+        client::hello(&mut socket, &hello, move || clock.now())
+            .await
+            .with_context(|| format!("device `{}`", self.plan.hello.id))?;
+        if let Some(camera) = self.plan.camera {
+            socket.send(client::json(&ClientMessage::Calibration { camera })).await?;
+        }
+        report.connections += 1;
+        Ok(socket)
+    }
+
+    async fn run(mut self, stop: tokio::sync::watch::Receiver<bool>) -> Result<DeviceReport> {
+        let mut report = DeviceReport {
+            id: self.plan.hello.id.clone(),
+            role: format!("{:?}", self.plan.hello.role).to_lowercase(),
+            clock_offset_ns: self.clock.origin_ns - client::system_ns(),
+            drift_ppm: self.clock.drift * 1e6,
+            planned: self.plan.samples.len() as u64,
+            ..DeviceReport::default()
+        };
+        let mut socket = self.connect(&mut report).await?;
+        let mut n = 0usize;
+        let mut last_send = Instant::now();
+        loop {
+            if *stop.borrow() {
+                break;
+            }
+            let Some((capture, sample)) = self.capture(n) else { break };
+            let sample = sample.clone();
+            if let Some(back) = self.disconnected_at(capture) {
+                // The device is away: close, let the frames of that span go, come back.
+                let _ = socket.close(None).await;
+                while self.capture(n).is_some_and(|(c, _)| c < back) {
+                    report.not_sent += 1;
+                    n += 1;
+                }
+                tokio::time::sleep_until(back).await;
+                socket = self.connect(&mut report).await?;
+                continue;
+            }
+            let jitter = self.jitter.mul_f64(self.rng.random::<f64>());
+            let send_at = (capture + jitter).max(last_send);
+            // Answer pings while waiting to send.
+            loop {
+                tokio::select! {
+                    _ = tokio::time::sleep_until(send_at) => break,
+                    message = socket.next() => match message {
+                        Some(Ok(Message::Text(text))) => {
+                            if let Ok(RelayMessage::Ping { relay_ns }) = serde_json::from_str(&text) {
+                                let pong = ClientMessage::Pong { relay_ns, device_ns: self.clock.now() };
+                                socket.send(client::json(&pong)).await?;
+                            }
+                        }
+                        Some(Ok(Message::Close(frame))) => {
+                            bail!("device `{}`: {}", self.plan.hello.id, client::describe_close(frame.as_ref()))
+                        }
+                        Some(Ok(_)) => {}
+                        Some(Err(e)) => bail!("device `{}`: {e}", self.plan.hello.id),
+                        None => bail!("device `{}`: the relay closed the connection", self.plan.hello.id),
+                    },
+                }
+            }
+            let frame = DataFrame {
+                channel: sample.stream.channel(),
+                timestamp_ns: self.clock.at(capture),
+                payload: sample.payload,
+            };
+            socket.send(Message::Binary(Bytes::from(frame.encode()))).await.context("sending a frame")?;
+            *report.sent.entry(stream_name(sample.stream)).or_default() += 1;
+            last_send = send_at;
+            n += 1;
+        }
+        // Let the last frames reach the relay before leaving.
+        let _ = tokio::time::timeout(Duration::from_secs(2), socket.close(None)).await;
+        Ok(report)
+    }
+}
+
+pub fn run(args: Args) -> Result<()> {
+    if !(args.speed.is_finite() && args.speed > 0.0) {
+        bail!("--speed must be positive");
+    }
+    if !(args.max_pose_hz.is_finite() && args.max_pose_hz > 0.0) {
+        bail!("--max-pose-hz must be positive");
+    }
+    let server = ServerAddress::parse(&args.url)?;
+    let imported = args.import.import(&args.session)?;
+    let (plans, range) = plan_devices(&imported.session, &args)?;
+    let join = match &args.room {
+        Some(room) => client::parse_join(room)?,
+        None => {
+            let room = client::create_room(&server)?;
+            let device = LiveLink { room: room.room.clone(), secret: room.device_secret.clone() };
+            let watch = LiveLink { room: room.room.clone(), secret: room.viewer_secret.clone() };
+            eprintln!("room created: device code {} (expires {})", room.device_code, room.expires_at);
+            eprintln!("  watch:   {}", server.watch_link(&watch));
+            eprintln!("  devices: {}", server.device_link(&device));
+            Join::Secret { room: device.room, secret: device.secret }
+        }
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
+    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
+    let session_span_s = (range.1 - range.0) as f64 / 1e9;
+    eprintln!(
+        "replaying {:.1} s of `{}` at {}×: {}",
+        session_span_s,
+        imported.session.name,
+        args.speed,
+        plans.iter().map(|p| format!("{} ({} frames)", p.hello.id, p.samples.len())).collect::<Vec<_>>().join(", ")
+    );
+    runtime.block_on(async move {
+        let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+        tokio::spawn(async move {
+            let _ = tokio::signal::ctrl_c().await;
+            let _ = stop_tx.send(true);
+        });
+        // A moment for every device to connect and the relay to learn its clock.
+        let start = Instant::now() + Duration::from_millis(1500);
+        let system_at_start = client::system_ns() + 1_500_000_000;
+        let mut tasks = Vec::new();
+        for plan in plans {
+            let id = plan.hello.id.clone();
+            let spread = args.clock_spread_s * 1e9;
+            let clock = DeviceClock {
+                origin: start,
+                origin_ns: system_at_start + if spread > 0.0 { rng.random_range(-spread..=spread) as i64 } else { 0 },
+                drift: if args.drift_ppm > 0.0 {
+                    rng.random_range(-args.drift_ppm..=args.drift_ppm) * 1e-6
+                } else {
+                    0.0
+                },
+                jumps: args
+                    .clock_jumps
+                    .iter()
+                    .filter(|f| f.device == id)
+                    .map(|f| (f.at_s, (f.value_s * 1e9) as i64))
+                    .collect(),
+            };
+            let run = DeviceRun {
+                server: server.clone(),
+                join: join.clone(),
+                clock,
+                start,
+                range,
+                speed: args.speed,
+                repeat: args.repeat,
+                jitter: Duration::from_secs_f64(args.jitter_ms.max(0.0) / 1e3),
+                rng: ChaCha8Rng::seed_from_u64(rng.random()),
+                disconnects: args
+                    .disconnects
+                    .iter()
+                    .filter(|f| f.device == id)
+                    .map(|f| (f.at_s, f.at_s + f.value_s.abs()))
+                    .collect(),
+                plan,
+            };
+            tasks.push(tokio::spawn(run.run(stop_rx.clone())));
+        }
+        let mut devices = Vec::new();
+        for task in tasks {
+            devices.push(task.await.context("a device task")??);
+        }
+        let report = ReplayReport { devices, session_span_s };
+        println!("{}", serde_json::to_string(&report)?);
+        Ok(())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use egoexo_core::glam::Vec3;
+    use egoexo_core::rigid::RigidTransform;
+
+    #[test]
+    fn faults_parse() {
+        assert_eq!(
+            parse_fault("observer-1@2.5+1").unwrap(),
+            Fault { device: "observer-1".into(), at_s: 2.5, value_s: 1.0 }
+        );
+        assert_eq!(parse_fault("wearer@3-0.5").unwrap().value_s, -0.5);
+        for bad in ["wearer", "wearer@3", "@3+1", "wearer@x+1", "wearer@-1+1"] {
+            assert!(parse_fault(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn a_fast_trajectory_streams_at_the_headset_rate_and_gaps_stay_invalid() {
+        // 1 kHz for one second with a 300 ms hole.
+        let mut t = Trajectory::default();
+        for ms in (0..=1000).filter(|ms| !(400..700).contains(ms)) {
+            t.timestamps_ns.push(ms * 1_000_000);
+            t.poses.push(RigidTransform { translation: Vec3::new(ms as f32, 0.0, 0.0), ..RigidTransform::IDENTITY });
+        }
+        let samples = pose_samples(&t, Stream::Head, 90.0, (0, 1_000_000_000));
+        assert_eq!(samples.len(), 91);
+        let invalid = samples.iter().filter(|s| matches!(s.payload, FramePayload::Pose(None))).count();
+        assert!((25..=28).contains(&invalid), "{invalid} frames in the hole");
+        // A 30 Hz trajectory goes out as it is.
+        let slow = Trajectory {
+            timestamps_ns: (0..30).map(|i| i * 33_333_333).collect(),
+            poses: vec![RigidTransform::IDENTITY; 30],
+        };
+        assert_eq!(pose_samples(&slow, Stream::Head, 90.0, (0, i64::MAX)).len(), 30);
+    }
+}

@@ -4,6 +4,7 @@
 // the events (docs/worker-protocol.md); this file reacts to them.
 
 import initViewer, { Viewer, WorkerClient, fragment_with_time, parse_fragment, share_fragment } from './pkg/egoexo_viewer.js';
+import { createLive } from './live.js';
 import { deleteShare, fetchShare, forgetShare, loadShareConfig, megabytes, rememberShare, savedShares, uploadShare } from './share.js';
 
 const $ = (id) => document.getElementById(id);
@@ -111,6 +112,7 @@ function restartWorker() {
 }
 
 function onWorkerEvent(event) {
+  if (live.onEvent(event)) return;
   switch (event.type) {
     case 'ready':
     case 'models':
@@ -131,9 +133,7 @@ function onWorkerEvent(event) {
     case 'imported':
       state.session = event.summary;
       showSession(event.summary);
-      showProgress('reconstructing…', 0);
-      state.reconstructStarted = performance.now();
-      state.client.reconstruct(true);
+      startReconstruction();
       break;
     case 'reconstructed':
       state.openedShare = null;
@@ -174,6 +174,17 @@ function onWorkerEvent(event) {
       console.warn('unexpected worker event', event);
   }
 }
+
+// Reconstructs the open session offline (ego-exo and the ego-only overlay).
+function startReconstruction() {
+  setBusy(true);
+  setState('busy');
+  showProgress('reconstructing…', 0);
+  state.reconstructStarted = performance.now();
+  state.client.reconstruct(true);
+}
+
+const live = createLive(state, { fail, showSession, startReconstruction });
 
 // ---------------------------------------------------------------- loading sessions
 
@@ -368,6 +379,8 @@ function showScene(scene, summary, how) {
   $('frame-count').hidden = false;
   applyToggles();
   $('rerun-button').hidden = !(state.openedShare?.includes_recording);
+  // A share without its recording has no session to save.
+  $('save-session').hidden = Boolean(state.openedShare && !state.openedShare.includes_recording);
   viewer.clear_loop();
   const time = state.pendingTime;
   state.pendingTime = null;
@@ -612,12 +625,14 @@ function wireControls() {
   $('rerun-button').addEventListener('click', () => {
     if (state.busy) return;
     clearError();
-    setBusy(true);
-    setState('busy');
-    showProgress('reconstructing…', 0);
-    state.reconstructStarted = performance.now();
-    state.client.reconstruct(true);
+    startReconstruction();
   });
+  $('save-session').addEventListener('click', () => {
+    if (state.busy) return;
+    setBusy(true);
+    state.client.save_session();
+  });
+  live.wire();
   for (const button of document.querySelectorAll('#export-buttons button')) {
     button.addEventListener('click', () => {
       if (state.busy) return;
@@ -647,6 +662,7 @@ state.pendingTime = address.time;
 state.share = await loadShareConfig();
 await startViewer();
 if (document.body.dataset.state === 'starting') setState('idle');
-if (address.share) await openShareLink(address.share);
+if (address.live) live.join(address.live.room, address.live.secret);
+else if (address.share) await openShareLink(address.share);
 else if (params.get('url')) await openUrl(params.get('url'));
 else if (address.sample) await openSample();

@@ -22,5 +22,7 @@ function deliver(message) {
 }
 
 await init();
-app = new WorkerApp(new URL('models/', self.location.href).href);
+// The clock the live connection answers the relay's pings with (Unix ms); the wasm never
+// reads one itself.
+app = new WorkerApp(new URL('models/', self.location.href).href, () => performance.timeOrigin + performance.now());
 for (const message of early.splice(0)) deliver(message);

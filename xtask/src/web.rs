@@ -158,12 +158,13 @@ fn gzipped_len(bytes: &[u8]) -> Result<u64> {
 }
 
 /// Files of `web/` served at the site's root (everything else is a versioned asset).
-const ROOT_FILES: &[&str] = &["index.html", "bench.html", "config.json"];
+const ROOT_FILES: &[&str] = &["index.html", "bench.html", "xr.html", "config.json"];
 
 /// `dist/` as a static site:
 ///
 /// ```text
-/// dist/index.html, bench.html   the pages (no-cache), their asset URLs rewritten to v/<build>/
+/// dist/index.html, bench.html,   the pages (no-cache), their asset URLs rewritten to v/<build>/
+///      xr.html
 /// dist/config.json              the page's deployment settings (no-cache, editable in place)
 /// dist/v/<build>/               web/ (scripts, styles, icon) + public/ + models/ + pkg/
 /// ```
@@ -331,6 +332,17 @@ mod tests {
         assert!(out.contains(r#"href="v/0123/style.css""#) && out.contains(r#"href="v/0123/favicon.svg""#));
         assert!(out.contains(r#"src="v/0123/main.js""#) && out.contains(r#"href="v/0123/pkg/egoexo_viewer.js""#));
         assert!(out.contains(r#"href="https://egoexo.example/""#) && out.contains(r##"href="#top""##));
+    }
+
+    #[test]
+    fn every_page_at_the_root_exists_and_the_xr_page_points_at_versioned_assets() {
+        let web = Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("web");
+        for name in ROOT_FILES {
+            assert!(web.join(name).is_file(), "web/{name} is listed in ROOT_FILES but missing");
+        }
+        let xr = versioned_html(&std::fs::read_to_string(web.join("xr.html")).unwrap(), "v/0123/");
+        assert!(xr.contains(r#"src="v/0123/xr.js""#) && xr.contains(r#"href="v/0123/xr.css""#), "{xr}");
+        assert!(xr.contains(r#"href="v/0123/pkg/egoexo_web_worker.js""#), "{xr}");
     }
 
     #[test]

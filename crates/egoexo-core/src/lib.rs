@@ -37,6 +37,7 @@ pub mod region;
 pub mod rigid;
 pub mod rotation;
 pub mod skeleton;
+pub mod xr;
 
 pub use aligned::{AlignedSession, Timeline};
 pub use camera::{CameraCalibration, CameraError, Fisheye624, Pinhole, Projection};

@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 
 /// The protocol's version; the worker says it in [`WorkerEvent::Ready`], and the page refuses
 /// a worker that speaks another.
-pub const WORKER_PROTOCOL_VERSION: u32 = 2;
+pub const WORKER_PROTOCOL_VERSION: u32 = 3;
 
 /// A job's number, chosen by the page (unique per worker).
 pub type JobId = u32;
@@ -52,6 +52,19 @@ pub enum WorkerRequest<B> {
     /// Stop job `job`: a queued job never starts, a running reconstruction stops at its next
     /// window; either answers `cancelled`. A finished job is not affected.
     Cancel { job: JobId },
+    /// Watch a live room (`docs/live-protocol.md`): connect to the relay at `url`
+    /// (`ws(s)://host/live`) with the room's viewer secret and reconstruct what streams in,
+    /// reading each frame out `lookahead` frames before its window's end. Replaces a live
+    /// connection already open. Answered by `live-joined`, then `live-status` every second
+    /// and `live-frame`s; `live-closed` when the connection ends.
+    LiveJoin { url: String, room: String, secret: String, lookahead: usize },
+    /// Change the live lookahead (frames, 0–95).
+    LiveLookahead { frames: usize },
+    /// Leave the live room; with `keep`, the take becomes the open session (named `name`)
+    /// as if imported: answered by `live-kept` (or `error`).
+    LiveStop { job: JobId, keep: bool, name: String },
+    /// Write the open session as a `.egoexo` file. Answered by `exported` or `error`.
+    SaveSession { job: JobId },
     /// Panic inside the worker's Rust code (tests of the page's crash handling).
     PanicForTest,
 }
@@ -64,8 +77,14 @@ impl<B> WorkerRequest<B> {
             | WorkerRequest::Reconstruct { job, .. }
             | WorkerRequest::Export { job, .. }
             | WorkerRequest::CreateShare { job, .. }
-            | WorkerRequest::OpenShare { job, .. } => Some(*job),
-            WorkerRequest::WarmUp | WorkerRequest::Cancel { .. } | WorkerRequest::PanicForTest => None,
+            | WorkerRequest::OpenShare { job, .. }
+            | WorkerRequest::LiveStop { job, .. }
+            | WorkerRequest::SaveSession { job } => Some(*job),
+            WorkerRequest::WarmUp
+            | WorkerRequest::Cancel { .. }
+            | WorkerRequest::PanicForTest
+            | WorkerRequest::LiveJoin { .. }
+            | WorkerRequest::LiveLookahead { .. } => None,
         }
     }
 
@@ -104,6 +123,12 @@ impl<B> WorkerRequest<B> {
             WorkerRequest::OpenShare { job, sealed, key } => WorkerRequest::OpenShare { job, sealed: f(sealed)?, key },
             WorkerRequest::Cancel { job } => WorkerRequest::Cancel { job },
             WorkerRequest::PanicForTest => WorkerRequest::PanicForTest,
+            WorkerRequest::LiveJoin { url, room, secret, lookahead } => {
+                WorkerRequest::LiveJoin { url, room, secret, lookahead }
+            }
+            WorkerRequest::LiveLookahead { frames } => WorkerRequest::LiveLookahead { frames },
+            WorkerRequest::LiveStop { job, keep, name } => WorkerRequest::LiveStop { job, keep, name },
+            WorkerRequest::SaveSession { job } => WorkerRequest::SaveSession { job },
         })
     }
 }
@@ -201,6 +226,26 @@ pub enum WorkerEvent<B> {
     },
     /// Job `job` was cancelled; nothing of it is kept.
     Cancelled { job: JobId },
+    /// The relay admitted the worker to live room `room` as a viewer.
+    LiveJoined { room: String, expires_at: String },
+    /// The live room, once a second: its devices as the relay sees them, the frames the
+    /// relay dropped for this viewer, the worker's clock offset to the relay (relay − worker,
+    /// ns, `None` until measured), and what the take holds.
+    LiveStatus {
+        devices: Vec<crate::live::DeviceStatus>,
+        dropped: u64,
+        clock_offset_ns: Option<i64>,
+        clock_uncertainty_ns: Option<i64>,
+        take: LiveTakeSummary,
+    },
+    /// One live frame to draw: its one-frame scene (for `Viewer.set_live_scene_json`) and
+    /// when it happened on the relay clock (Unix ms; latency = now on the relay clock − this).
+    LiveFrame { scene: B, frame: LiveFrameInfo },
+    /// The live connection ended (`code`, `reason` as the relay gave them; 1000 when the
+    /// page left).
+    LiveClosed { code: u16, reason: String },
+    /// The take of job `job` is the open session now.
+    LiveKept { job: JobId, summary: SessionSummary, take: LiveTakeSummary },
     /// A job (or, with `job` null, the model loading of a warm-up) failed.
     Error {
         job: Option<JobId>,
@@ -226,8 +271,13 @@ impl<B> WorkerEvent<B> {
             | WorkerEvent::Exported { job, .. }
             | WorkerEvent::ShareSealed { job, .. }
             | WorkerEvent::ShareOpened { job, .. }
-            | WorkerEvent::Cancelled { job } => Some(*job),
+            | WorkerEvent::Cancelled { job }
+            | WorkerEvent::LiveKept { job, .. } => Some(*job),
             WorkerEvent::Error { job, .. } => *job,
+            WorkerEvent::LiveJoined { .. }
+            | WorkerEvent::LiveStatus { .. }
+            | WorkerEvent::LiveFrame { .. }
+            | WorkerEvent::LiveClosed { .. } => None,
             WorkerEvent::Ready { .. }
             | WorkerEvent::Status { .. }
             | WorkerEvent::Models { .. }
@@ -242,6 +292,7 @@ impl<B> WorkerEvent<B> {
             WorkerEvent::Exported { file, .. } => vec![&file.bytes],
             WorkerEvent::ShareSealed { sealed, .. } => vec![sealed],
             WorkerEvent::ShareOpened { scene, .. } => vec![scene],
+            WorkerEvent::LiveFrame { scene, .. } => vec![scene],
             _ => Vec::new(),
         }
     }
@@ -273,6 +324,13 @@ impl<B> WorkerEvent<B> {
             WorkerEvent::Cancelled { job } => WorkerEvent::Cancelled { job },
             WorkerEvent::Error { job, stage, kind, message } => WorkerEvent::Error { job, stage, kind, message },
             WorkerEvent::Panic { message } => WorkerEvent::Panic { message },
+            WorkerEvent::LiveJoined { room, expires_at } => WorkerEvent::LiveJoined { room, expires_at },
+            WorkerEvent::LiveStatus { devices, dropped, clock_offset_ns, clock_uncertainty_ns, take } => {
+                WorkerEvent::LiveStatus { devices, dropped, clock_offset_ns, clock_uncertainty_ns, take }
+            }
+            WorkerEvent::LiveFrame { scene, frame } => WorkerEvent::LiveFrame { scene: f(scene)?, frame },
+            WorkerEvent::LiveClosed { code, reason } => WorkerEvent::LiveClosed { code, reason },
+            WorkerEvent::LiveKept { job, summary, take } => WorkerEvent::LiveKept { job, summary, take },
         })
     }
 }
@@ -361,6 +419,43 @@ pub enum ErrorKind {
     ShareInvalid,
     /// The message is not a request of this protocol version.
     BadRequest,
+}
+
+/// What a live take holds.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LiveTakeSummary {
+    /// Frames kept, in all.
+    pub frames: u64,
+    /// Frames kept per device and stream (`wearer` → `head` → 1234).
+    pub streams: BTreeMap<String, BTreeMap<String, u64>>,
+    /// Seconds from the wearer's first to last head pose.
+    pub head_span_s: f64,
+    /// Live frames shown, and passed over because the worker was busy.
+    pub shown: u64,
+    pub skipped: u64,
+}
+
+/// A live frame's facts (beside its scene).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LiveFrameInfo {
+    /// The frame on the take's 30 fps grid.
+    pub frame: usize,
+    /// When it happened, relay clock, Unix milliseconds.
+    pub timestamp_ms: f64,
+    /// The frames its window spans and the lookahead it was read out at.
+    pub window_frames: usize,
+    pub lookahead: usize,
+    /// `ego-exo`, or `ego-only` when no observer has keypoints of this frame.
+    pub method: String,
+    /// Observers whose rays (gate ≥ 0.5) shaped this frame.
+    pub exo_observers: Vec<String>,
+    /// Whether the wearer's head was tracked at this frame.
+    pub tracked: bool,
+    /// Frames passed over before it (the worker was busy).
+    pub skipped: usize,
+    /// What making it took in the worker (the take's window, alignment, engine, scene),
+    /// milliseconds, by the glue's clock (`None` without one).
+    pub compute_ms: Option<f64>,
 }
 
 /// One file a models manifest lists.

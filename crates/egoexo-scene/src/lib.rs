@@ -128,11 +128,66 @@ impl SceneData {
         }
         if problems.is_empty() { Ok(()) } else { Err(problems.join("; ")) }
     }
+
+    /// The scene of frames `range` only (clamped to the scene), e.g. the one frame a live
+    /// reconstruction shows out of its window. `start_s` moves with the first frame.
+    pub fn frames_slice(&self, range: std::ops::Range<usize>) -> SceneData {
+        let start = range.start.min(self.frames);
+        let end = range.end.clamp(start, self.frames);
+        let per = |values: &[f32], width: usize| values[start * width..end * width].to_vec();
+        let flags = |values: &[bool]| values[start..end].to_vec();
+        let joints = NUM_JOINTS * 3;
+        SceneData {
+            format_version: self.format_version,
+            name: self.name.clone(),
+            fps: self.fps,
+            frames: end - start,
+            start_s: self.start_s + start as f64 / f64::from(self.fps),
+            parents: self.parents.clone(),
+            joints: per(&self.joints, joints),
+            valid: flags(&self.valid),
+            exo_evidence: flags(&self.exo_evidence),
+            ego_only_joints: self.ego_only_joints.as_deref().map(|j| per(j, joints)),
+            ground_truth_joints: self.ground_truth_joints.as_deref().map(|j| per(j, joints)),
+            devices: self
+                .devices
+                .iter()
+                .map(|d| DeviceTrack { name: d.name.clone(), positions: per(&d.positions, 3), valid: flags(&d.valid) })
+                .collect(),
+            observers: self
+                .observers
+                .iter()
+                .map(|o| ObserverScene {
+                    id: o.id.clone(),
+                    camera_poses: per(&o.camera_poses, 7),
+                    valid: flags(&o.valid),
+                    half_fov: o.half_fov,
+                    image_size: o.image_size,
+                    rays: per(&o.rays, 4 * EXO_KEYPOINT_COUNT),
+                })
+                .collect(),
+            floor_y: self.floor_y,
+            method: self.method.clone(),
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_slice_keeps_its_frames_and_stays_consistent() {
+        let mut scene = SceneData::new("s", 30.0, 10, "ego-exo");
+        scene.joints.iter_mut().enumerate().for_each(|(i, v)| *v = i as f32);
+        scene.valid[7] = true;
+        let one = scene.frames_slice(7..8);
+        one.check().unwrap();
+        assert_eq!((one.frames, one.valid.clone()), (1, vec![true]));
+        assert_eq!(one.joints[0], (7 * NUM_JOINTS * 3) as f32);
+        assert!((one.start_s - 7.0 / 30.0).abs() < 1e-9);
+        assert_eq!(scene.frames_slice(8..99).frames, 2);
+    }
 
     #[test]
     fn a_new_scene_is_consistent_and_survives_json() {

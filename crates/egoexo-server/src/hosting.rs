@@ -1,8 +1,8 @@
 //! Hosting the page: `dist/` as `cargo xtask dist` builds it, with the headers a production
 //! deployment wants.
 //!
-//! - Assets under `/v/<build>/` (everything but `index.html`, `bench.html`, `config.json` and
-//!   the icon; the build id changes with any file's content) are
+//! - Assets under `/v/<build>/` (everything but the pages `index.html`, `bench.html`, `xr.html`,
+//!   `config.json` and the icon; the build id changes with any file's content) are
 //!   `Cache-Control: public, max-age=31536000, immutable`; the rest is `no-cache`, so a new
 //!   build is picked up on the next load and old assets never mix with new ones.
 //! - `Content-Security-Policy` without `unsafe-inline` or `unsafe-eval` (the wasm modules

@@ -100,6 +100,34 @@ pub fn align(session: &Session, options: &AlignOptions) -> Result<AlignedSession
         });
     }
     let timeline = Timeline { start_ns: first, fps: options.fps, frames: frames as usize };
+    align_on_timeline(session, timeline, options)
+}
+
+/// [`align`] onto a given timeline instead of one spanning the head trajectory: the live
+/// reconstruction resamples each window of a take on one fixed 30 fps grid, so a frame keeps
+/// its time from window to window. Frames the head does not cover are invalid.
+pub fn align_on_timeline(
+    session: &Session,
+    timeline: Timeline,
+    options: &AlignOptions,
+) -> Result<AlignedSession, AlignError> {
+    if !(timeline.fps.is_finite() && timeline.fps > 0.0 && timeline.fps <= 1000.0) {
+        return Err(AlignError::InvalidFps(timeline.fps));
+    }
+    if timeline.frames > options.max_frames {
+        return Err(AlignError::TooManyFrames {
+            span_s: timeline.frames as f64 / f64::from(timeline.fps),
+            fps: timeline.fps,
+            frames: timeline.frames as u128,
+            limit: options.max_frames,
+        });
+    }
+    if session.wearer.head.is_empty() {
+        return Err(AlignError::EmptyHead);
+    }
+    crate::validate::validate_session(session)?;
+    let frame_ns = 1e9 / f64::from(timeline.fps);
+    let tolerance = options.keypoint_tolerance_ns.unwrap_or((frame_ns / 2.0).round() as i64);
     let times: Vec<i64> = (0..timeline.frames).map(|i| timeline.timestamp_ns(i)).collect();
 
     let mut coverage = Vec::new();

@@ -11,13 +11,20 @@
 //!   page ↔ worker protocol (`egoexo_protocol::worker`, `docs/worker-protocol.md`), model
 //!   fetching with the Cache API, cooperative cancel between windows, panic reporting.
 //!
+//! - [`live`] — [`live::LiveReconstructor`]: a take streaming in from the live relay,
+//!   reconstructed window by window at a chosen lookahead, one frame to draw at a time.
+//! - [`xr`] — the WebXR page's (`web/xr.html`) poses, frames and messages of the live
+//!   protocol (exported to JS as `xr_pose_frame`, `XrJoin`, …).
+//!
 //! `web/worker.js` only creates the `WorkerApp` and hands it the page's messages. Nothing
 //! here reads the clock or spawns threads; timing belongs to the page.
 
+pub mod live;
 #[cfg(target_arch = "wasm32")]
 mod runtime;
 pub mod scene;
 pub mod worker;
+pub mod xr;
 
 #[cfg(target_arch = "wasm32")]
 pub use runtime::{MODEL_CACHE, TEST_PANIC_MESSAGE, WorkerApp};

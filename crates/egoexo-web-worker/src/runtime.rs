@@ -44,6 +44,19 @@ use crate::worker::{SessionWorker, WorkerError};
 type Request = WorkerRequest<JsBytes>;
 type Event = WorkerEvent<JsBytes>;
 
+mod live;
+
+/// Lets the event loop run: resolves on the next task (a round trip through `channel`, one
+/// waiter per channel at a time).
+async fn yield_on(channel: &MessageChannel) {
+    let (port1, port2) = (channel.port1(), channel.port2());
+    let tick = Promise::new(&mut |resolve, _reject| {
+        port2.set_onmessage(Some(&resolve));
+        let _ = port1.post_message(&JsValue::UNDEFINED);
+    });
+    let _ = JsFuture::from(tick).await;
+}
+
 /// The Cache API cache holding the model files.
 pub const MODEL_CACHE: &str = "egoexo-models";
 
@@ -67,8 +80,11 @@ pub struct WorkerApp {
 impl WorkerApp {
     /// Starts the worker: installs the panic reporter, posts `ready`. `models_url` is the
     /// folder holding `manifest.json` (absolute, or relative to the worker script).
+    ///
+    /// `clock` (optional) returns the time in Unix milliseconds (`performance.timeOrigin +
+    /// performance.now()`); the live connection answers the relay's clock pings with it.
     #[wasm_bindgen(constructor)]
-    pub fn new(models_url: &str) -> Result<WorkerApp, JsValue> {
+    pub fn new(models_url: &str, clock: Option<js_sys::Function>) -> Result<WorkerApp, JsValue> {
         let scope: DedicatedWorkerGlobalScope = js_sys::global().dyn_into()?;
         let models_url = Url::new_with_base(models_url, &scope.location().href())?.href();
         install_panic_reporter();
@@ -81,6 +97,8 @@ impl WorkerApp {
             current: Cell::new(None),
             cancel_requested: Cell::new(false),
             channel: MessageChannel::new()?,
+            live: RefCell::new(None),
+            clock,
         });
         runtime.post(Event::Ready { protocol: WORKER_PROTOCOL_VERSION });
         Ok(WorkerApp { runtime })
@@ -103,6 +121,11 @@ impl WorkerApp {
         match request {
             WorkerRequest::Cancel { job } => runtime.cancel(job),
             WorkerRequest::PanicForTest => panic!("{TEST_PANIC_MESSAGE}"),
+            WorkerRequest::LiveLookahead { frames } => {
+                if let Some(connection) = runtime.live.borrow_mut().as_mut() {
+                    connection.reconstructor.set_lookahead(frames);
+                }
+            }
             request => {
                 runtime.queue.borrow_mut().push_back(request);
                 if !runtime.running.replace(true) {
@@ -128,6 +151,10 @@ struct Runtime {
     cancel_requested: Cell<bool>,
     /// Yields to the event loop ([`Runtime::yield_now`]).
     channel: MessageChannel,
+    /// The live room being watched.
+    live: RefCell<Option<live::LiveConnection>>,
+    /// The page glue's clock (Unix ms), for the relay's clock pings.
+    clock: Option<js_sys::Function>,
 }
 
 /// Why loading the models failed.
@@ -189,7 +216,12 @@ impl Runtime {
         self.running.set(false);
     }
 
-    async fn process(&self, request: Request) {
+    /// The glue's clock, Unix milliseconds.
+    fn clock_ms(&self) -> Option<f64> {
+        self.clock.as_ref()?.call0(&JsValue::UNDEFINED).ok()?.as_f64()
+    }
+
+    async fn process(self: &Rc<Self>, request: Request) {
         let job = request.job();
         if !self.worker.borrow().has_models() {
             self.post(Event::Status { text: "loading the models…".into() });
@@ -216,7 +248,35 @@ impl Runtime {
                     self.fail(Some(job), ErrorStage::Share, &e);
                 }
             }
-            WorkerRequest::WarmUp | WorkerRequest::Cancel { .. } | WorkerRequest::PanicForTest => {}
+            WorkerRequest::LiveJoin { url, room, secret, lookahead } => live::join(self, &url, room, secret, lookahead),
+            WorkerRequest::LiveStop { job, keep, name } => self.live_stop(job, keep, &name),
+            WorkerRequest::SaveSession { job } => {
+                let saved = self.worker.borrow().save_session();
+                self.post_exported(job, saved);
+            }
+            WorkerRequest::WarmUp
+            | WorkerRequest::Cancel { .. }
+            | WorkerRequest::PanicForTest
+            | WorkerRequest::LiveLookahead { .. } => {}
+        }
+    }
+
+    /// Leaves the live room; with `keep`, opens the take as the session.
+    fn live_stop(&self, job: JobId, keep: bool, name: &str) {
+        let Some(connection) = self.live.borrow_mut().take() else {
+            let error = WorkerError::Take(egoexo_session::live::TakeError::NoWearerHead(name.to_string()));
+            return self.fail(Some(job), ErrorStage::Import, &error);
+        };
+        connection.close();
+        if !keep {
+            return self.post(Event::LiveClosed { code: 1000, reason: "the viewer left".into() });
+        }
+        let take = connection.reconstructor.summary();
+        let reconstructor = connection.reconstructor;
+        let kept = self.worker.borrow_mut().keep_take(reconstructor.take(), name);
+        match kept {
+            Ok(summary) => self.post(Event::LiveKept { job, summary, take }),
+            Err(e) => self.fail(Some(job), ErrorStage::Import, &e),
         }
     }
 
@@ -274,6 +334,10 @@ impl Runtime {
 
     fn export(&self, job: JobId, format: ExportFormat) {
         let exported = self.worker.borrow().export(format);
+        self.post_exported(job, exported);
+    }
+
+    fn post_exported(&self, job: JobId, exported: Result<crate::ExportedFile, WorkerError>) {
         match exported {
             Ok(file) => self.post(Event::Exported {
                 job,
@@ -361,12 +425,7 @@ impl Runtime {
 
     /// Lets the event loop run (and so a `cancel` arrive): resolves on the next task.
     async fn yield_now(&self) {
-        let (port1, port2) = (self.channel.port1(), self.channel.port2());
-        let tick = Promise::new(&mut |resolve, _reject| {
-            port2.set_onmessage(Some(&resolve));
-            let _ = port1.post_message(&JsValue::UNDEFINED);
-        });
-        let _ = JsFuture::from(tick).await;
+        yield_on(&self.channel).await;
     }
 
     /// Fetches `manifest.json` and the files it lists (from the cache where it has them) and

@@ -56,6 +56,12 @@ pub enum WorkerError {
     Share(#[from] ShareError),
     #[error("cannot write the recording into the share: {0}")]
     ShareRecording(String),
+    #[error(transparent)]
+    Live(#[from] crate::live::LiveError),
+    #[error("the take cannot be kept: {0}")]
+    Take(#[from] egoexo_session::live::TakeError),
+    #[error("cannot write the session: {0}")]
+    SaveSession(String),
 }
 
 impl WorkerError {
@@ -70,7 +76,9 @@ impl WorkerError {
             WorkerError::NoSession => ErrorKind::NoSession,
             WorkerError::NoReconstruction => ErrorKind::NoReconstruction,
             WorkerError::Share(_) => ErrorKind::ShareInvalid,
-            WorkerError::ShareRecording(_) => ErrorKind::Export,
+            WorkerError::ShareRecording(_) | WorkerError::SaveSession(_) => ErrorKind::Export,
+            WorkerError::Live(_) => ErrorKind::Reconstruct,
+            WorkerError::Take(_) => ErrorKind::Import,
         }
     }
 
@@ -315,6 +323,45 @@ impl SessionWorker {
             }
         }
         self.finish_reconstruction(task)
+    }
+
+    /// The models' frame rate, for a [`LiveReconstructor`](crate::live::LiveReconstructor).
+    pub fn live_fps(&self) -> f32 {
+        self.fps()
+    }
+
+    /// Reconstructs the newest frame of a live take that can be shown, if any.
+    pub fn live_frame(
+        &self,
+        live: &mut crate::live::LiveReconstructor,
+    ) -> Result<Option<crate::live::LiveFrame>, WorkerError> {
+        let engine = self.engine.as_ref().ok_or(WorkerError::NoModels)?;
+        Ok(live.reconstruct_next(engine)?)
+    }
+
+    /// "Stop and keep": the take becomes the open session (replacing any), ready for the
+    /// offline reconstruction, exports, sharing and [`SessionWorker::save_session`].
+    pub fn keep_take(
+        &mut self,
+        take: &egoexo_session::live::LiveTake,
+        name: &str,
+    ) -> Result<SessionSummary, WorkerError> {
+        let (session, warnings) = take.to_session(name, None)?;
+        self.open_imported(Imported { session, source: egoexo_session::SourceKind::Egoexo, warnings })
+    }
+
+    /// The open session as a `.egoexo` file.
+    pub fn save_session(&self) -> Result<ExportedFile, WorkerError> {
+        let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
+        let bytes = write_egoexo_zip(&open.imported.session).map_err(|e| WorkerError::SaveSession(e.to_string()))?;
+        let name: String = open
+            .imported
+            .session
+            .name
+            .chars()
+            .map(|c| if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') { c } else { '_' })
+            .collect();
+        Ok(ExportedFile { bytes, file_name: format!("{name}.egoexo"), mime_type: "application/zip" })
     }
 
     /// The last reconstruction made here (the full method), if any.

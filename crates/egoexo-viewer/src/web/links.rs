@@ -2,6 +2,7 @@
 //! `#sample&t=3-7`): the link format is `egoexo_protocol::share::LinkFragment`, defined once in
 //! Rust for the page and the CLI alike.
 
+use egoexo_protocol::live::LiveLink;
 use egoexo_protocol::share::{LinkFragment, LinkTime, ShareId, ShareKey};
 use serde::Serialize;
 use wasm_bindgen::prelude::*;
@@ -13,8 +14,16 @@ struct ShareRef {
 }
 
 #[derive(Serialize)]
+struct LiveRef {
+    room: String,
+    secret: String,
+}
+
+#[derive(Serialize)]
 struct Fragment {
     share: Option<ShareRef>,
+    /// A watch (or device) link's room: `#live=<room>.<secret>`.
+    live: Option<LiveRef>,
     time: Option<LinkTime>,
     sample: bool,
 }
@@ -23,17 +32,35 @@ fn parse(fragment: &str) -> Result<LinkFragment, JsError> {
     LinkFragment::parse(fragment).map_err(|e| JsError::new(&format!("the address is not a valid egoexo link: {e}")))
 }
 
-/// Reads a fragment (`location.hash`): `{share: {id, key} | null, time: {start, end} | null,
-/// sample}`. Throws, saying what is wrong, on a malformed share or time.
+/// Reads a fragment (`location.hash`): `{share: {id, key} | null, live: {room, secret} |
+/// null, time: {start, end} | null, sample}`. Throws, saying what is wrong, on a malformed
+/// share or time.
 #[wasm_bindgen]
 pub fn parse_fragment(fragment: &str) -> Result<JsValue, JsError> {
+    let serializer = serde_wasm_bindgen::Serializer::json_compatible();
+    if let Some(link) = LiveLink::parse_fragment(fragment) {
+        let live = Some(LiveRef { room: link.room, secret: link.secret });
+        let value = Fragment { share: None, live, time: None, sample: false };
+        return value.serialize(&serializer).map_err(|e| JsError::new(&e.to_string()));
+    }
+    if fragment.trim_start_matches('#').starts_with("live=") {
+        return Err(JsError::new("the address is not a valid live link: expected #live=<room>.<secret>"));
+    }
     let parsed = parse(fragment)?;
     let value = Fragment {
+        live: None,
         share: parsed.share.map(|(id, key)| ShareRef { id: id.to_string(), key: key.encode() }),
         time: parsed.time,
         sample: parsed.sample,
     };
-    value.serialize(&serde_wasm_bindgen::Serializer::json_compatible()).map_err(|e| JsError::new(&e.to_string()))
+    value.serialize(&serializer).map_err(|e| JsError::new(&e.to_string()))
+}
+
+/// The fragment of a live link (without `#`): `live=<room>.<secret>` — with the viewer secret
+/// the page's watch link, with the device secret `xr.html`'s.
+#[wasm_bindgen]
+pub fn live_fragment(room: &str, secret: &str) -> String {
+    LiveLink { room: room.to_string(), secret: secret.to_string() }.fragment()
 }
 
 /// `fragment` with its time set to `start` seconds (or the range `start`–`end`), or removed

@@ -705,6 +705,26 @@ impl Viewer {
         })
     }
 
+    /// Shows one live frame: `bytes` are `serde_json` of a one-frame `SceneData`. Unlike
+    /// [`Viewer::set_scene_json`] the camera stays where the user put it (it frames the
+    /// wearer only for the first live frame, or after a recorded scene). Throws (and keeps
+    /// the current frame) when the bytes are not a valid scene.
+    pub fn set_live_scene_json(&self, bytes: &[u8]) -> Result<(), JsError> {
+        let scene = parse_scene(bytes).map_err(|e| js_error(e.into()))?;
+        self.update(|s| {
+            let first = s.scene.as_ref().is_none_or(|old| old.frames != 1 || old.name != scene.name);
+            s.playback = Playback::new(scene.frames, f64::from(scene.fps));
+            s.target.renderer.set_static_lines(&static_lines(&scene));
+            s.scene = Some(scene);
+            s.scene_generation += 1;
+            if first {
+                s.reset_camera();
+            }
+            s.dirty = true;
+            Ok(())
+        })
+    }
+
     /// Whether the scene has an ego-only reconstruction to overlay.
     pub fn has_ego_only(&self) -> bool {
         self.read(|s| s.scene.as_ref().is_some_and(|sc| sc.ego_only_joints.is_some()))

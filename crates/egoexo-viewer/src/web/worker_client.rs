@@ -106,6 +106,33 @@ impl WorkerClient {
         Ok(job)
     }
 
+    /// Watches live room `room` through the relay at `url` (`ws(s)://host/live`) with its
+    /// viewer `secret`, reading each frame out `lookahead` frames before its window's end.
+    pub fn live_join(&self, url: String, room: String, secret: String, lookahead: usize) -> Result<(), JsError> {
+        self.send(&Request::LiveJoin { url, room, secret, lookahead })
+    }
+
+    /// Changes the live lookahead (frames).
+    pub fn live_lookahead(&self, frames: usize) -> Result<(), JsError> {
+        self.send(&Request::LiveLookahead { frames })
+    }
+
+    /// Leaves the live room; with `keep`, the take becomes the open session named `name`
+    /// (answered by `live-kept`). Returns the job number.
+    pub fn live_stop(&mut self, keep: bool, name: String) -> Result<JobId, JsError> {
+        let job = self.next_job();
+        self.send(&Request::LiveStop { job, keep, name })?;
+        Ok(job)
+    }
+
+    /// Writes the open session as a `.egoexo` file (answered by `exported`). Returns the job
+    /// number.
+    pub fn save_session(&mut self) -> Result<JobId, JsError> {
+        let job = self.next_job();
+        self.send(&Request::SaveSession { job })?;
+        Ok(job)
+    }
+
     /// Cancels the current job; its events from now on are dropped by [`Self::receive`].
     /// Returns its number, if there was one.
     pub fn cancel(&mut self) -> Result<Option<JobId>, JsError> {

@@ -1,0 +1,224 @@
+//! Live reconstruction of a take as it streams in (plain Rust; the browser's message loop
+//! feeds it from the relay's socket, the native tests from a recorded session).
+//!
+//! Frames from the relay go into a [`LiveTake`] (relay clock, every device on it). The take is
+//! read on a fixed grid at the models' rate, frame 0 at the wearer's first head pose, so a
+//! frame keeps its time from one window to the next. To show frame `f` with lookahead `L`,
+//! the engine runs on the window of [`WINDOW`] frames ending at `f + L` (fewer at the start
+//! of a take) and `f` is read out of it: `f` can be shown once the head has reached
+//! `f + L`, so the delay is at least `L` frames. Each call shows the newest frame that can
+//! be shown; frames passed over while the worker was busy are counted, never queued, so
+//! what is drawn is never stale. A gap in the head stream is a gap in the take (alignment
+//! marks its frames invalid); nothing is repeated or invented.
+
+use std::ops::Range;
+
+use egoexo_core::aligned::Timeline;
+use egoexo_infer::windows::WINDOW;
+use egoexo_infer::{Engine, InferError, Method, ReconstructOptions};
+use egoexo_protocol::live::{DataFrame, RelayMessage};
+use egoexo_protocol::worker::{LiveFrameInfo, LiveTakeSummary};
+use egoexo_session::align::{AlignError, AlignOptions, align_on_timeline};
+use egoexo_session::live::{FrameAdded, LiveTake, TakeError};
+use thiserror::Error;
+
+/// Why a live frame could not be made.
+#[derive(Debug, Error)]
+pub enum LiveError {
+    #[error("the take's window cannot be aligned: {0}")]
+    Align(#[from] AlignError),
+    #[error(transparent)]
+    Infer(#[from] InferError),
+    #[error("the take's window: {0}")]
+    Take(#[from] TakeError),
+    #[error("the live frame's scene: {0}")]
+    Scene(String),
+}
+
+/// The most frames a lookahead may be (a window's length minus one).
+pub const MAX_LOOKAHEAD: usize = WINDOW - 1;
+
+/// Seconds of interpolation margin read around a window from the take.
+const MARGIN_NS: i64 = 200_000_000;
+
+/// One frame to draw.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LiveFrame {
+    /// The frame on the take's grid (0 at the wearer's first head pose).
+    pub frame: usize,
+    /// Its time on the relay clock, nanoseconds.
+    pub timestamp_ns: i64,
+    /// The window it was read out of (grid frames).
+    pub window: Range<usize>,
+    /// The viewer's scene of this one frame (`egoexo_scene::SceneData` as JSON).
+    pub scene_json: Vec<u8>,
+    /// The method that made it: ego-exo, or ego-only when no observer has keypoints of this
+    /// frame.
+    pub method: Method,
+    /// Observers that contributed a ray with gate ≥ 0.5 to this frame.
+    pub exo_observers: Vec<String>,
+    /// Whether the wearer's head was tracked at this frame.
+    pub tracked: bool,
+    /// Frames that became showable since the last frame shown but were passed over.
+    pub skipped: usize,
+}
+
+/// A take and the state of its live reconstruction.
+#[derive(Debug)]
+pub struct LiveReconstructor {
+    take: LiveTake,
+    fps: f32,
+    lookahead: usize,
+    last_shown: Option<usize>,
+    shown: u64,
+    skipped: u64,
+}
+
+impl LiveReconstructor {
+    /// `fps`: the models' rate; `lookahead`: frames (clamped to [`MAX_LOOKAHEAD`]).
+    pub fn new(fps: f32, lookahead: usize) -> Self {
+        Self {
+            take: LiveTake::new(),
+            fps,
+            lookahead: lookahead.min(MAX_LOOKAHEAD),
+            last_shown: None,
+            shown: 0,
+            skipped: 0,
+        }
+    }
+
+    pub fn take(&self) -> &LiveTake {
+        &self.take
+    }
+
+    /// The take, leaving an empty one (for "Stop and keep").
+    pub fn into_take(self) -> LiveTake {
+        self.take
+    }
+
+    pub fn lookahead(&self) -> usize {
+        self.lookahead
+    }
+
+    pub fn set_lookahead(&mut self, frames: usize) {
+        self.lookahead = frames.min(MAX_LOOKAHEAD);
+    }
+
+    /// Frames shown and passed over so far.
+    pub fn counts(&self) -> (u64, u64) {
+        (self.shown, self.skipped)
+    }
+
+    /// What the take holds, for the page.
+    pub fn summary(&self) -> LiveTakeSummary {
+        take_summary(&self.take, self.shown, self.skipped)
+    }
+
+    /// Files the relay's channel lists and calibrations; other messages are not the take's.
+    pub fn handle_relay_message(&mut self, message: &RelayMessage) {
+        match message {
+            RelayMessage::Channels { channels } => self.take.set_channels(channels),
+            RelayMessage::Calibration { device, camera } => self.take.set_camera(device, *camera),
+            _ => {}
+        }
+    }
+
+    pub fn add_frame(&mut self, frame: &DataFrame) -> FrameAdded {
+        self.take.add_frame(frame)
+    }
+
+    fn frame_ns(&self) -> f64 {
+        1e9 / f64::from(self.fps)
+    }
+
+    /// The grid's frame 0 and the newest frame the head has reached.
+    fn grid(&self) -> Option<(i64, usize)> {
+        let (first, last) = self.take.head_range_ns()?;
+        Some((first, ((last - first) as f64 / self.frame_ns() + 1e-6).floor() as usize))
+    }
+
+    /// The newest frame that can be shown now, if it is newer than the last one shown.
+    pub fn next_frame(&self) -> Option<usize> {
+        let (_, reached) = self.grid()?;
+        let frame = reached.checked_sub(self.lookahead)?;
+        (self.last_shown.is_none_or(|last| frame > last)).then_some(frame)
+    }
+
+    /// Reconstructs and returns the newest showable frame ([`LiveReconstructor::next_frame`]),
+    /// or `None` when there is nothing new.
+    pub fn reconstruct_next(&mut self, engine: &Engine) -> Result<Option<LiveFrame>, LiveError> {
+        let Some(frame) = self.next_frame() else { return Ok(None) };
+        let Some((origin, _)) = self.grid() else { return Ok(None) };
+        // The frame counts as shown even if it fails below, so a failing window is not retried.
+        let skipped = self.last_shown.map_or(0, |last| frame - last - 1);
+        self.last_shown = Some(frame);
+        self.skipped += skipped as u64;
+        let end = frame + self.lookahead;
+        let start = (end + 1).saturating_sub(WINDOW);
+        let timeline = Timeline {
+            start_ns: origin + (start as f64 * self.frame_ns()).round() as i64,
+            fps: self.fps,
+            frames: end + 1 - start,
+        };
+        let last_ns = timeline.timestamp_ns(timeline.frames - 1);
+        let range = timeline.start_ns - MARGIN_NS..=last_ns + MARGIN_NS;
+        let (session, _) = self.take.to_session("live", Some(range))?;
+        let aligned =
+            align_on_timeline(&session, timeline, &AlignOptions { fps: self.fps, ..AlignOptions::default() })?;
+        let index = frame - start;
+        // Ego-exo when an observer has keypoints of this very frame; otherwise (none
+        // connected, none streaming, or the wearer out of every view) the ego-only network,
+        // which was trained without observers.
+        let has_exo = aligned.observers.iter().any(|o| o.keypoints[index].iter().any(Option::is_some));
+        let method = if has_exo { Method::EgoExo } else { Method::EgoOnly };
+        let options = ReconstructOptions { method, stride: WINDOW, ..ReconstructOptions::default() };
+        let recon = engine.reconstruct(&aligned, &options, &mut |_| true)?;
+        let scene = crate::scene::build_scene(&aligned, &recon, None).frames_slice(index..index + 1);
+        scene.check().map_err(LiveError::Scene)?;
+        let exo_observers = recon
+            .gates
+            .iter()
+            .filter(|g| g.gates.get(index).is_some_and(|k| k.iter().any(|&v| v >= 0.5)))
+            .map(|g| g.observer_id.clone())
+            .collect();
+        self.shown += 1;
+        Ok(Some(LiveFrame {
+            frame,
+            timestamp_ns: timeline.timestamp_ns(index),
+            window: start..end + 1,
+            scene_json: serde_json::to_vec(&scene).map_err(|e| LiveError::Scene(e.to_string()))?,
+            method,
+            exo_observers,
+            tracked: recon.valid.get(index).copied().unwrap_or(false),
+            skipped,
+        }))
+    }
+}
+
+/// What `take` holds, for the page (`shown` / `skipped`: live frames so far).
+pub fn take_summary(take: &LiveTake, shown: u64, skipped: u64) -> LiveTakeSummary {
+    let mut summary = LiveTakeSummary { frames: take.stats().frames, shown, skipped, ..LiveTakeSummary::default() };
+    for (device, stream, count) in take.frame_counts() {
+        let name = serde_json::to_value(stream).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default();
+        summary.streams.entry(device).or_default().insert(name, count as u64);
+    }
+    summary.head_span_s = take.head_range_ns().map_or(0.0, |(a, b)| (b - a) as f64 / 1e9);
+    summary
+}
+
+impl LiveFrame {
+    /// The facts the page shows beside the scene.
+    pub fn info(&self, lookahead: usize) -> LiveFrameInfo {
+        LiveFrameInfo {
+            frame: self.frame,
+            timestamp_ms: self.timestamp_ns as f64 / 1e6,
+            window_frames: self.window.len(),
+            lookahead,
+            method: self.method.name().to_string(),
+            exo_observers: self.exo_observers.clone(),
+            tracked: self.tracked,
+            skipped: self.skipped,
+            compute_ms: None,
+        }
+    }
+}

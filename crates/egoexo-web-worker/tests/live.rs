@@ -1,0 +1,157 @@
+//! The live reconstruction natively: the fixture session streamed frame by frame into a
+//! [`LiveReconstructor`] as the relay delivers it (channel list, calibrations, then every
+//! device's frames in time order), a frame reconstructed whenever one can be shown.
+#![cfg(not(target_arch = "wasm32"))]
+
+mod common;
+
+use std::sync::Arc;
+
+use common::*;
+use egoexo_infer::{InferError, Method};
+use egoexo_protocol::live::{ChannelInfo, DataFrame, DeviceRole, FramePayload, RelayMessage, Stream};
+use egoexo_scene::SceneData;
+use egoexo_session::{FileTree, ImportOptions, Limits, Session, import_session};
+use egoexo_web_worker::SessionWorker;
+use egoexo_web_worker::live::LiveReconstructor;
+
+fn worker() -> SessionWorker {
+    let mut worker = SessionWorker::new();
+    worker
+        .load_models(MANIFEST, |file| {
+            model_file(file).map(<[u8]>::to_vec).ok_or(InferError::ReadModel { file: file.into(), message: "?".into() })
+        })
+        .unwrap();
+    worker
+}
+
+fn session() -> Session {
+    let tree = FileTree::from_zip(SESSION_NAME, Arc::<[u8]>::from(SESSION), Limits::default()).unwrap();
+    import_session(&tree, &ImportOptions::default()).unwrap().session
+}
+
+/// The relay's view of the session: its channel list, calibrations and frames in time order.
+fn as_relay(session: &Session, observers: bool) -> (Vec<RelayMessage>, Vec<DataFrame>) {
+    let mut channels = Vec::new();
+    let mut frames = Vec::new();
+    let mut add = |device: &str, role, stream, t: &egoexo_session::model::Trajectory| {
+        let channel = channels.len() as u16;
+        channels.push(ChannelInfo { channel, device: device.into(), role, stream });
+        for (ts, pose) in t.timestamps_ns.iter().zip(&t.poses) {
+            frames.push(DataFrame { channel, timestamp_ns: *ts, payload: FramePayload::Pose(Some(*pose)) });
+        }
+    };
+    let w = &session.wearer;
+    add("wearer", DeviceRole::Wearer, Stream::Head, &w.head);
+    add("wearer", DeviceRole::Wearer, Stream::LeftWrist, w.left_wrist.as_ref().unwrap());
+    add("wearer", DeviceRole::Wearer, Stream::RightWrist, w.right_wrist.as_ref().unwrap());
+    let mut messages = Vec::new();
+    for o in session.observers.iter().filter(|_| observers) {
+        add(&o.id, DeviceRole::Observer, Stream::Head, &o.head);
+        messages.push(RelayMessage::Calibration { device: o.id.clone(), camera: o.camera });
+    }
+    for o in session.observers.iter().filter(|_| observers) {
+        let channel = channels.len() as u16;
+        channels.push(ChannelInfo {
+            channel,
+            device: o.id.clone(),
+            role: DeviceRole::Observer,
+            stream: Stream::Keypoints,
+        });
+        let k = o.keypoints.as_ref().unwrap();
+        for (ts, points) in k.timestamps_ns.iter().zip(&k.frames) {
+            frames.push(DataFrame { channel, timestamp_ns: *ts, payload: FramePayload::Keypoints(*points) });
+        }
+    }
+    frames.sort_by_key(|f| f.timestamp_ns);
+    messages.insert(0, RelayMessage::Channels { channels });
+    (messages, frames)
+}
+
+#[test]
+fn a_streamed_take_is_shown_frame_by_frame_on_one_grid_and_kept() {
+    let mut worker = worker();
+    let session = session();
+    let (messages, frames) = as_relay(&session, true);
+    let lookahead = 8;
+    let mut live = LiveReconstructor::new(worker.live_fps(), lookahead);
+    for m in &messages {
+        live.handle_relay_message(m);
+    }
+    let head_channel = 0;
+    let mut shown = Vec::new();
+    for frame in &frames {
+        live.add_frame(frame);
+        if frame.channel == head_channel
+            && let Some(f) = worker.live_frame(&mut live).unwrap()
+        {
+            shown.push(f);
+        }
+    }
+    let (first, last) = session.wearer.head.time_range_ns().unwrap();
+    let grid_frames = ((last - first) as f64 * 30.0 / 1e9 + 1e-6).floor() as usize + 1;
+    // Every frame up to the lookahead before the end, once each, in order.
+    assert_eq!(shown.len(), grid_frames - lookahead);
+    assert!(shown.windows(2).all(|w| w[1].frame == w[0].frame + 1 && w[1].skipped == 0));
+    let head = &session.wearer.head;
+    for f in &shown {
+        assert_eq!(f.window.end, f.frame + lookahead + 1);
+        assert!(f.window.len() <= 96 && f.window.contains(&f.frame));
+        assert_eq!(f.timestamp_ns, first + (f.frame as f64 * 1e9 / 30.0).round() as i64);
+        assert!(f.tracked);
+        assert!(f.exo_observers.is_empty() || f.method == Method::EgoExo);
+        let scene: SceneData = serde_json::from_slice(&f.scene_json).unwrap();
+        scene.check().unwrap();
+        assert_eq!(scene.frames, 1);
+        assert!(scene.joints.iter().all(|v| v.is_finite()));
+        assert_eq!(scene.observers.len(), 2);
+        // The head drawn is the head pose at the frame's time (the sample nearest to it).
+        let nearest = head.timestamps_ns.iter().position(|t| (t - f.timestamp_ns).abs() < 2_000_000).unwrap();
+        let drawn = egoexo_core::glam::Vec3::from_slice(&scene.devices[0].positions);
+        assert!(drawn.distance(head.poses[nearest].translation) < 0.01, "frame {}", f.frame);
+    }
+    assert!(shown.iter().any(|f| !f.exo_observers.is_empty()), "no frame had an observer's ray");
+    // Frames without keypoints of any observer (occlusion, out of view) are ego-only.
+    let ego_exo = shown.iter().filter(|f| f.method == Method::EgoExo).count();
+    assert!(ego_exo * 10 > shown.len() * 8, "{ego_exo} of {} frames ego-exo", shown.len());
+
+    // Stop and keep: the take is an ordinary session with every frame.
+    let take = live.into_take();
+    let summary = worker.keep_take(&take, "take").unwrap();
+    assert_eq!(summary.frames, grid_frames);
+    assert_eq!(summary.observers.len(), 2);
+    let saved = worker.save_session().unwrap();
+    assert_eq!(saved.file_name, "take.egoexo");
+    let mut again = SessionWorker::new();
+    assert_eq!(again.import_archive("take.egoexo", saved.bytes).unwrap().frames, grid_frames);
+}
+
+#[test]
+fn a_busy_worker_skips_to_the_newest_frame_and_without_observers_says_ego_only() {
+    let worker = worker();
+    let session = session();
+    let (messages, frames) = as_relay(&session, false);
+    let mut live = LiveReconstructor::new(worker.live_fps(), 0);
+    for m in &messages {
+        live.handle_relay_message(m);
+    }
+    let mut shown = Vec::new();
+    // The worker gets to reconstruct only after every 30th frame (10 frames of each stream).
+    for (i, frame) in frames.iter().enumerate() {
+        live.add_frame(frame);
+        if i % 30 == 29
+            && let Some(f) = worker.live_frame(&mut live).unwrap()
+        {
+            shown.push(f);
+        }
+    }
+    assert!(shown.len() > 3);
+    assert!(shown.iter().all(|f| f.method == Method::EgoOnly && f.exo_observers.is_empty()));
+    assert!(shown.iter().skip(1).all(|f| f.skipped > 0), "frames passed over are counted");
+    let (count, skipped) = live.counts();
+    assert_eq!(count as usize, shown.len());
+    assert_eq!(skipped as usize, shown.iter().map(|f| f.skipped).sum::<usize>());
+    // The newest frame, then nothing new: nothing to show.
+    assert!(worker.live_frame(&mut live).unwrap().is_some());
+    assert!(worker.live_frame(&mut live).unwrap().is_none());
+}

@@ -1,0 +1,160 @@
+// Live capture end to end in headless Chromium against `egoexo serve`: the page creates a
+// room, `egoexo live replay` streams the sample as three devices (a wearer with wrists and two
+// observers, each on its own offset, drifting clock; both observers leave for 2 s and the
+// wearer's clock jumps), the page draws the wearer moving, lists every device with a
+// plausible rate, shows its latency, says when it reconstructs ego-only, keeps going while a
+// malformed client is thrown out, and after "Stop and keep" the take holds every frame that
+// was sent and reconstructs offline. A second page joins late by the watch link.
+
+import assert from 'node:assert/strict';
+import { spawn } from 'node:child_process';
+import { after, before, describe, test } from 'node:test';
+
+import { APP_URL, decodePng, launch, openApp, skeletonPixels } from './browser.mjs';
+
+const REPO = new URL('../../', import.meta.url).pathname;
+const SAMPLE = `${REPO}public/samples/cmu-14_20.egoexo`;
+const EGOEXO = process.env.EGOEXO_BIN ?? 'egoexo';
+
+let browser;
+before(async () => {
+  browser = await launch();
+});
+after(async () => {
+  await browser?.close();
+});
+
+// Runs `egoexo args…`; resolves with its stdout's last line as JSON once it exits 0.
+function egoexo(args) {
+  return new Promise((resolve, reject) => {
+    const child = spawn(EGOEXO, args, { stdio: ['ignore', 'pipe', 'pipe'] });
+    let out = '';
+    let err = '';
+    child.stdout.on('data', (d) => (out += d));
+    child.stderr.on('data', (d) => (err += d));
+    child.on('error', reject);
+    child.on('exit', (code) => {
+      if (code !== 0) return reject(new Error(`egoexo ${args.join(' ')} exited ${code}:\n${err}`));
+      try {
+        resolve(JSON.parse(out.trim().split('\n').pop()));
+      } catch (error) {
+        reject(new Error(`egoexo ${args.join(' ')} printed ${out}: ${error.message}`));
+      }
+    });
+  });
+}
+
+const live = (app) => app.page.evaluate(() => {
+  const l = window.egoexo.live;
+  return {
+    frames: l.frames,
+    modes: [...l.modes],
+    devices: l.devices,
+    take: l.take,
+    kept: l.kept,
+    dropped: l.dropped,
+    latencies: l.latencies.length,
+    lastFrame: l.lastFrame,
+    root: window.egoexo.live.lastJoints?.slice(0, 3) ?? null,
+  };
+});
+
+async function waitFor(app, predicate, what, timeout = 60_000) {
+  const start = Date.now();
+  for (;;) {
+    const now = await live(app);
+    if (predicate(now)) return now;
+    if (Date.now() - start > timeout) {
+      throw new Error(`waiting for ${what}: ${JSON.stringify({ ...now, devices: now.devices?.length })} (errors: ${JSON.stringify(app.errors)})`);
+    }
+    await new Promise((r) => setTimeout(r, 200));
+  }
+}
+
+describe('live capture', () => {
+  test('a replayed session streams into the page, is drawn live, and is kept frame for frame', async () => {
+    const app = await openApp(browser, '?backend=webgl2');
+    assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
+    await app.page.getByRole('button', { name: 'Go live' }).click();
+    await app.page.waitForSelector('#live-room[data-code]');
+    const code = await app.page.getAttribute('#live-room', 'data-code');
+    const watchLink = await app.page.getByLabel('watch link').inputValue();
+    await app.waitState('live');
+
+    const replay = egoexo([
+      'live', 'replay', SAMPLE, '--url', APP_URL, '--room', code, '--duration-s', '12',
+      '--disconnect', 'observer-1@4+2', '--disconnect', 'observer-2@4+2', '--clock-jump', 'wearer@7+3',
+    ]);
+    // The skeleton moves.
+    const early = await waitFor(app, (l) => l.frames >= 20 && l.root, 'the first live frames');
+    const later = await waitFor(app, (l) => l.frames >= early.frames + 45, 'more live frames');
+    const moved = Math.hypot(...later.root.map((v, i) => v - early.root[i]));
+    assert.ok(moved > 0.02, `the root moved ${moved} m`);
+    // Each device at a plausible rate (the sample's streams are 30 Hz).
+    const streaming = await waitFor(app, (l) => l.devices.length === 3 && l.devices.every((d) => d.rates_hz.length > 0), 'rates');
+    for (const device of streaming.devices) {
+      for (const [stream, hz] of device.rates_hz) assert.ok(hz > 15 && hz < 45, `${device.device} ${stream} at ${hz} Hz`);
+    }
+    const png = decodePng(await app.page.locator('#view').screenshot());
+    const pixels = skeletonPixels(png.rgba);
+    assert.ok(pixels.left > 30 && pixels.right > 30, `skeleton pixels ${JSON.stringify(pixels)}`);
+
+    // A malformed client is closed; the page carries on.
+    // (a device that joins properly, then sends a frame 5 bytes long)
+    const closed = await app.page.evaluate(([url, code]) => new Promise((resolve) => {
+      const socket = new WebSocket(url, 'egoexo-live.1');
+      const hello = { type: 'hello', protocol: 1, join: { code }, device: { id: 'broken', role: 'observer', streams: ['head'] } };
+      socket.onopen = () => socket.send(JSON.stringify(hello));
+      socket.onmessage = (e) => {
+        if (JSON.parse(e.data).type === 'welcome') socket.send(new Uint8Array([1, 0, 0, 0, 1]));
+      };
+      socket.onclose = (e) => resolve({ code: e.code, reason: e.reason });
+    }), [`${APP_URL.replace(/^http/, 'ws').replace(/\/$/, '')}/live`, code]);
+    assert.equal(closed.code, 1007, JSON.stringify(closed));
+    const carriedOn = (await live(app)).frames;
+    await waitFor(app, (l) => l.frames > carriedOn + 10, 'frames after the malformed client');
+
+    // A late viewer by the watch link draws at once (it receives the last 3.2 s).
+    const watcher = await openApp(browser, `?backend=webgl2${new URL(watchLink).hash}`);
+    await waitFor(watcher, (l) => l.frames >= 2, 'the late viewer drawing');
+
+    const sent = await replay;
+    // Every device listed with a plausible rate, clock offset and latency.
+    const status = await waitFor(app, (l) => l.take && l.devices.length === 4, 'the devices');
+    for (const id of ['wearer', 'observer-1', 'observer-2']) {
+      const device = status.devices.find((d) => d.device === id);
+      assert.ok(device.frames > 100, JSON.stringify(device));
+      assert.ok(device.clock_offset_ns !== null && device.clock_uncertainty_ns !== null, JSON.stringify(device));
+    }
+    // The malformed client is listed as gone; nothing it sent is in the take.
+    assert.equal(status.devices.find((d) => d.device === 'broken').connected, false);
+    const rows = await app.page.locator('#live-devices tbody tr').count();
+    assert.equal(rows, 4);
+    const shown = await live(app);
+    assert.ok(shown.modes.includes('ego-exo') && shown.modes.includes('ego-only'), `modes ${shown.modes}`);
+    assert.ok(shown.latencies > 30, 'latency measured');
+    const p95 = Number(await app.page.getAttribute('#live-latency', 'data-p95'));
+    assert.ok(Number.isFinite(p95) && p95 > 0, `p95 ${p95}`);
+    assert.match(await app.text('#live-latency'), /p50 \d+ ms, p95 \d+ ms/);
+    // Rates: the replay sends the sample's 30 Hz streams.
+    const text = await app.text('#live-devices');
+    assert.match(text, /observer-1/);
+
+    // Stop and keep: every frame sent is in the take, which reconstructs offline.
+    await new Promise((r) => setTimeout(r, 1500));
+    await app.page.getByRole('button', { name: 'Stop and keep' }).click();
+    await app.waitState(['ready', 'error']);
+    const kept = (await live(app)).kept;
+    for (const device of sent.devices) {
+      assert.deepEqual(kept.streams[device.id], device.sent, `device ${device.id}`);
+    }
+    assert.equal((await live(app)).dropped, 0);
+    const summary = await app.page.evaluate(() => window.egoexo.session);
+    assert.ok(summary.frames >= 355 && summary.frames <= 365, `${summary.frames} frames for 12 s`);
+    assert.equal(summary.observers.length, 2);
+    assert.deepEqual(app.errors, []);
+    assert.deepEqual(watcher.errors, []);
+    await watcher.close();
+    await app.close();
+  });
+});

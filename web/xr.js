@@ -1,0 +1,390 @@
+// The WebXR page: a headset's browser joins a live room as the wearer and streams, every XR
+// frame, the viewer pose (head) and both wrists (controller grips, or tracked hands' wrist
+// joints) to the relay (docs/live-protocol.md, "The WebXR page").
+//
+// This file reads WebXR and the clock and owns the socket. The geometry (XR spaces → session
+// conventions), the frames, the hello, the pongs and which closes to retry are Rust, in
+// pkg/egoexo_web_worker.js (crates/egoexo-web-worker/src/xr.rs over egoexo_core::xr).
+
+import init, { XrJoin, XrSource, xr_answer, xr_close_may_retry, xr_pose_frame } from './pkg/egoexo_web_worker.js';
+
+const SUBPROTOCOL = 'egoexo-live.1';
+// Frames are skipped, not queued, while the socket holds more than this unsent (about half a
+// second of frames): a pose that waits behind a slow network is stale by the time it arrives.
+const MAX_BUFFERED_BYTES = 4 * 1024;
+const RETRY_DELAYS_MS = [500, 1000, 2000, 4000, 8000];
+const DEVICE_ID_KEY = 'egoexo.xr.device-id';
+
+const $ = (id) => document.getElementById(id);
+const ui = {
+  form: $('join-form'),
+  codeField: $('code-field'),
+  code: $('code-input'),
+  device: $('device-input'),
+  enter: $('enter-button'),
+  stop: $('stop-button'),
+  linkNote: $('link-note'),
+  linkLabel: $('link-label'),
+  supportNote: $('support-note'),
+  errorPanel: $('error-panel'),
+  errorMessage: $('error-message'),
+  connection: $('connection'),
+  tracking: $('tracking'),
+  framesSent: $('frames-sent'),
+  rate: $('rate'),
+  closeReason: $('close-reason'),
+};
+
+// The page's clock in nanoseconds since the Unix epoch: it stamps the frames and answers the
+// relay's pings, so the relay can put both on its own clock.
+const epochNs = (performanceMs) => (performance.timeOrigin + performanceMs) * 1e6;
+const nowNs = () => epochNs(performance.now());
+
+const SIDES = [
+  { handedness: 'left', grip: () => XrSource.LeftGrip, hand: () => XrSource.LeftHandWrist },
+  { handedness: 'right', grip: () => XrSource.RightGrip, hand: () => XrSource.RightHandWrist },
+];
+
+const page = {
+  linkJoin: null, // XrJoin from #live=…, if the address has one
+  xrMode: null, // 'immersive-vr', 'immersive-ar' or 'inline'
+  run: null, // the running stream, below
+};
+
+function setState(state) {
+  document.body.dataset.state = state;
+}
+
+function showError(message) {
+  ui.errorMessage.textContent = message;
+  ui.errorPanel.hidden = false;
+  setState('error');
+}
+
+function clearError() {
+  ui.errorPanel.hidden = true;
+  ui.errorMessage.textContent = '';
+}
+
+function message(error) {
+  return error instanceof Error ? error.message : String(error);
+}
+
+// One stream: an XR session and the socket to the relay, reconnected on retryable closes
+// while the session lasts.
+class Stream {
+  constructor(join, deviceId, session) {
+    this.hello = join.hello(deviceId);
+    this.joinLabel = join.label;
+    this.session = session;
+    this.socket = null;
+    this.welcomed = false;
+    this.ended = false;
+    this.retries = 0;
+    this.retryTimer = 0;
+    this.framesSent = 0;
+    this.framesSkipped = 0;
+    this.frameTimes = []; // performance.now() of recent XR frames, for the rate
+    this.tracking = '—';
+    this.refSpace = null;
+    this.gl = null;
+    this.position = new Float32Array(3);
+    this.orientation = new Float32Array(4);
+    this.warned = false;
+    this.uiTimer = setInterval(() => this.showStats(), 250);
+  }
+
+  connect() {
+    if (this.ended) return;
+    const url = new URL('live', location.href);
+    url.protocol = location.protocol === 'https:' ? 'wss:' : 'ws:';
+    url.hash = '';
+    url.search = '';
+    ui.connection.textContent = `connecting to ${this.joinLabel}…`;
+    setState(this.retries > 0 ? 'reconnecting' : 'connecting');
+    let socket;
+    try {
+      socket = new WebSocket(url.href, SUBPROTOCOL);
+    } catch (error) {
+      this.fail(`Could not open the connection to the relay: ${message(error)}`);
+      return;
+    }
+    socket.binaryType = 'arraybuffer';
+    this.socket = socket;
+    socket.onopen = () => socket.send(this.hello);
+    socket.onmessage = (event) => this.onMessage(event);
+    socket.onclose = (event) => this.onClose(socket, event);
+  }
+
+  onMessage(event) {
+    if (typeof event.data !== 'string') return; // devices receive no data frames
+    let pong;
+    try {
+      // Parsed in Rust: the relay's time must be echoed to the nanosecond.
+      pong = xr_answer(event.data, nowNs());
+    } catch (error) {
+      console.warn('egoexo xr: ignoring a relay message:', message(error));
+      return;
+    }
+    if (pong !== undefined) {
+      this.socket?.send(pong);
+      return;
+    }
+    const parsed = JSON.parse(event.data);
+    if (parsed.type === 'welcome') {
+      this.welcomed = true;
+      this.retries = 0;
+      clearError();
+      setState('streaming');
+      ui.connection.textContent = `streaming to ${this.joinLabel} (room open until ${parsed.expires_at})`;
+    }
+  }
+
+  onClose(socket, event) {
+    if (socket !== this.socket) return;
+    this.socket = null;
+    this.welcomed = false;
+    const reason = event.reason || (event.code === 1006 ? 'the connection was lost' : 'no reason given');
+    ui.closeReason.textContent = `${reason} (${event.code})`;
+    if (this.ended) return;
+    if (xr_close_may_retry(event.code)) {
+      const delay = RETRY_DELAYS_MS[Math.min(this.retries, RETRY_DELAYS_MS.length - 1)];
+      this.retries += 1;
+      setState('reconnecting');
+      ui.connection.textContent = `reconnecting in ${(delay / 1000).toFixed(1)} s (${reason})`;
+      this.retryTimer = setTimeout(() => this.connect(), delay);
+    } else {
+      this.fail(`The relay closed the connection: ${reason} (${event.code}).`);
+    }
+  }
+
+  // Ends the stream for good with an error the person can read once out of XR.
+  fail(text) {
+    this.stop();
+    showError(text);
+  }
+
+  stop(closeReason = 'the wearer stopped streaming') {
+    if (this.ended) return;
+    this.ended = true;
+    clearTimeout(this.retryTimer);
+    clearInterval(this.uiTimer);
+    this.showStats();
+    if (this.socket && this.socket.readyState <= WebSocket.OPEN) this.socket.close(1000, closeReason);
+    this.socket = null;
+    ui.connection.textContent = 'not connected';
+    try {
+      this.session.end().catch(() => {}); // already ended when the person left XR
+    } catch {
+      // ended already
+    }
+    if (page.run === this) page.run = null;
+    ui.enter.disabled = false;
+    ui.stop.hidden = true;
+    if (document.body.dataset.state !== 'error') setState('ready');
+  }
+
+  async startXr() {
+    const session = this.session;
+    session.addEventListener('end', () => this.stop('the headset left XR'));
+    const canvas = document.createElement('canvas');
+    const gl = canvas.getContext('webgl2', { xrCompatible: true, alpha: false }) ??
+      canvas.getContext('webgl', { xrCompatible: true, alpha: false });
+    if (!gl) throw new Error('This browser has no WebGL, which WebXR needs to show anything.');
+    await gl.makeXRCompatible?.();
+    session.updateRenderState({ baseLayer: new XRWebGLLayer(session, gl) });
+    this.gl = gl;
+    // 'local-floor' puts the floor at y = 0; 'local' (origin at the head's first pose) will do.
+    for (const type of ['local-floor', 'local']) {
+      try {
+        this.refSpace = await session.requestReferenceSpace(type);
+        this.refSpaceType = type;
+        break;
+      } catch {
+        // try the next
+      }
+    }
+    if (!this.refSpace) throw new Error('This headset offers no tracked space (local-floor or local) to stream poses in.');
+    session.requestAnimationFrame((t, frame) => this.onFrame(t, frame));
+  }
+
+  onFrame(time, frame) {
+    if (this.ended) return;
+    frame.session.requestAnimationFrame((t, f) => this.onFrame(t, f));
+    const now = performance.now();
+    this.frameTimes.push(now);
+    while (this.frameTimes.length > 0 && this.frameTimes[0] < now - 1000) this.frameTimes.shift();
+    // The poses are predicted for the display time: that is when they are true.
+    const stamp = epochNs(frame.predictedDisplayTime ?? time);
+    const viewer = frame.getViewerPose(this.refSpace);
+    const tracked = [];
+    this.send(XrSource.Viewer, stamp, viewer && !viewer.emulatedPosition ? viewer.transform : null);
+    if (viewer && !viewer.emulatedPosition) tracked.push('head');
+    for (const side of SIDES) {
+      const { source, transform, what } = this.wrist(frame, side);
+      this.send(source, stamp, transform);
+      tracked.push(transform ? `${side.handedness} ${what}` : `${side.handedness} lost`);
+    }
+    this.tracking = tracked.join(' · ');
+    this.draw(frame);
+  }
+
+  // The wrist pose of one side: the tracked hand's wrist joint, else the controller's grip.
+  wrist(frame, side) {
+    const input = [...frame.session.inputSources].find((s) => s.handedness === side.handedness);
+    if (input?.hand && frame.getJointPose) {
+      const joint = input.hand.get('wrist');
+      const pose = joint ? frame.getJointPose(joint, this.refSpace) : null;
+      return { source: side.hand(), transform: pose && !pose.emulatedPosition ? pose.transform : null, what: 'hand' };
+    }
+    if (input?.gripSpace) {
+      const pose = frame.getPose(input.gripSpace, this.refSpace);
+      return { source: side.grip(), transform: pose && !pose.emulatedPosition ? pose.transform : null, what: 'controller' };
+    }
+    return { source: side.grip(), transform: null, what: 'controller' };
+  }
+
+  send(source, stampNs, transform) {
+    const socket = this.socket;
+    if (!socket || !this.welcomed || socket.readyState !== WebSocket.OPEN) return;
+    if (socket.bufferedAmount > MAX_BUFFERED_BYTES) {
+      this.framesSkipped += 1;
+      return;
+    }
+    let bytes;
+    try {
+      if (transform) {
+        const { position: p, orientation: q } = transform;
+        this.position.set([p.x, p.y, p.z]);
+        this.orientation.set([q.x, q.y, q.z, q.w]);
+      }
+      bytes = xr_pose_frame(source, stampNs, this.position, this.orientation, transform !== null);
+    } catch (error) {
+      // A pose the runtime got wrong (not finite, not a rotation) is sent as lost.
+      if (!this.warned) console.warn('egoexo xr: a pose was not usable:', message(error));
+      this.warned = true;
+      bytes = xr_pose_frame(source, stampNs, this.position, this.orientation, false);
+    }
+    socket.send(bytes);
+    this.framesSent += 1;
+  }
+
+  // What the wearer sees: the colour of the connection (green streaming, amber connecting,
+  // red stopped).
+  draw(frame) {
+    const gl = this.gl;
+    const layer = frame.session.renderState.baseLayer;
+    if (!gl || !layer) return;
+    gl.bindFramebuffer(gl.FRAMEBUFFER, layer.framebuffer);
+    const state = document.body.dataset.state;
+    const [r, g, b] = state === 'streaming' ? [0.03, 0.2, 0.1] : state === 'error' ? [0.35, 0.04, 0.04] : [0.3, 0.2, 0.02];
+    gl.clearColor(r, g, b, 1);
+    gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
+  }
+
+  showStats() {
+    ui.framesSent.textContent = `${this.framesSent}${this.framesSkipped ? ` (${this.framesSkipped} skipped on a slow network)` : ''}`;
+    const hz = this.frameTimes.length;
+    ui.rate.textContent = this.ended ? '—' : `${hz} Hz (${this.refSpaceType ?? 'no'} space)`;
+    ui.tracking.textContent = this.ended ? '—' : this.tracking;
+  }
+}
+
+async function enterXr() {
+  clearError();
+  let join;
+  try {
+    join = page.linkJoin ?? XrJoin.parse(ui.code.value);
+    join.hello(ui.device.value); // checks the device id before entering XR
+  } catch (error) {
+    showError(message(error));
+    return;
+  }
+  const deviceId = ui.device.value.trim();
+  try {
+    localStorage.setItem(DEVICE_ID_KEY, deviceId);
+  } catch {
+    // storage may be off; the default id is fine
+  }
+  ui.enter.disabled = true;
+  let session;
+  try {
+    // Asked for first, while the click still counts as the person's gesture.
+    const features = page.xrMode === 'inline'
+      ? { optionalFeatures: ['local-floor', 'local'] }
+      : { optionalFeatures: ['local-floor', 'local', 'hand-tracking'] };
+    session = await navigator.xr.requestSession(page.xrMode, features);
+  } catch (error) {
+    ui.enter.disabled = false;
+    showError(`The headset did not start XR: ${message(error)}`);
+    return;
+  }
+  const run = new Stream(join, deviceId, session);
+  page.run = run;
+  ui.stop.hidden = false;
+  run.connect();
+  try {
+    await run.startXr();
+  } catch (error) {
+    run.fail(message(error));
+  }
+}
+
+async function detectXr() {
+  if (!navigator.xr) {
+    return window.isSecureContext
+      ? 'This browser has no WebXR. Open this page in a headset\'s browser (Meta Quest Browser).'
+      : 'WebXR needs a secure page: open this page over https:// (or on localhost).';
+  }
+  for (const mode of ['immersive-vr', 'immersive-ar', 'inline']) {
+    try {
+      if (await navigator.xr.isSessionSupported(mode)) {
+        page.xrMode = mode;
+        return null;
+      }
+    } catch {
+      // not this mode
+    }
+  }
+  return 'This browser has WebXR but cannot start an XR session here.';
+}
+
+async function main() {
+  await init();
+  try {
+    page.linkJoin = XrJoin.fromFragment(location.hash) ?? null;
+  } catch (error) {
+    showError(message(error));
+  }
+  if (page.linkJoin) {
+    ui.linkLabel.textContent = page.linkJoin.label;
+    ui.linkNote.hidden = false;
+    ui.codeField.hidden = true;
+  }
+  try {
+    const saved = localStorage.getItem(DEVICE_ID_KEY);
+    if (saved) ui.device.value = saved;
+  } catch {
+    // storage may be off
+  }
+  ui.form.addEventListener('submit', (event) => {
+    event.preventDefault();
+    if (!page.run) enterXr();
+  });
+  ui.stop.addEventListener('click', () => page.run?.stop());
+  const unsupported = await detectXr();
+  if (unsupported) {
+    ui.supportNote.textContent = unsupported;
+    ui.supportNote.hidden = false;
+    if (document.body.dataset.state !== 'error') setState('unsupported');
+    return;
+  }
+  if (page.xrMode === 'inline') {
+    ui.supportNote.textContent = 'No immersive XR here: streaming from an inline session, if this device tracks one.';
+    ui.supportNote.hidden = false;
+  }
+  ui.enter.disabled = false;
+  if (document.body.dataset.state !== 'error') setState('ready');
+}
+
+main().catch((error) => showError(`The page could not start: ${message(error)}`));

@@ -130,6 +130,36 @@ fn simulate_inspect_reconstruct_and_evaluate() {
     );
     assert_eq!(paired[0]["method"], "ego-exo");
     assert_eq!(paired[0]["baseline"], "ego-only");
+
+    // The live table: each lookahead against the offline result on the same frames.
+    let json = ok(&[
+        "eval",
+        "--lib",
+        &s(&lib),
+        "--subjects",
+        "9",
+        "--observers",
+        "1",
+        "--tracking",
+        "1",
+        "--models",
+        &fixture_models(),
+        "--live",
+        "--lookaheads",
+        "0,8",
+        "--json",
+    ]);
+    let live: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let rows = live["rows"].as_array().unwrap();
+    let cells: Vec<_> =
+        rows.iter().map(|r| (r["method"].as_str().unwrap(), r["lookahead"].as_u64().unwrap())).collect();
+    assert_eq!(cells, [("ego-only", 0), ("ego-only", 8), ("ego-exo", 0), ("ego-exo", 8)]);
+    assert_eq!(live["offline"].as_array().unwrap().len(), 2);
+    assert!(live["frames"].as_u64().unwrap() > 100);
+    for row in rows {
+        let (ratio, vs) = (row["mpjpe_ratio"].as_f64().unwrap(), row["vs_offline_cm"].as_f64().unwrap());
+        assert!(ratio.is_finite() && ratio > 0.0 && vs.is_finite() && vs >= 0.0, "{row}");
+    }
 }
 
 #[test]

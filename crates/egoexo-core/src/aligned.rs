@@ -99,6 +99,52 @@ pub struct AlignedSession {
 }
 
 impl AlignedSession {
+    /// The session on frames `range` of its timeline only (clamped to it): what a live
+    /// reconstruction sees of a window. Coverage is not carried over (it describes the whole
+    /// session).
+    pub fn frames_slice(&self, range: std::ops::Range<usize>) -> AlignedSession {
+        let start = range.start.min(self.timeline.frames);
+        let end = range.end.clamp(start, self.timeline.frames);
+        let trajectory = |t: &AlignedTrajectory| AlignedTrajectory {
+            poses: t.poses[start..end].to_vec(),
+            valid: t.valid[start..end].to_vec(),
+        };
+        AlignedSession {
+            name: self.name.clone(),
+            timeline: Timeline {
+                start_ns: self.timeline.timestamp_ns(start),
+                fps: self.timeline.fps,
+                frames: end - start,
+            },
+            head: trajectory(&self.head),
+            left_wrist: self.left_wrist.as_ref().map(trajectory),
+            right_wrist: self.right_wrist.as_ref().map(trajectory),
+            observers: self
+                .observers
+                .iter()
+                .map(|o| AlignedObserver {
+                    id: o.id.clone(),
+                    camera: o.camera,
+                    head: trajectory(&o.head),
+                    keypoints: o.keypoints[start..end].to_vec(),
+                    context_features: o.context_features.as_ref().map(|c| c[start..end].to_vec()),
+                })
+                .collect(),
+            skeleton: self.skeleton.clone(),
+            head_joint_in_device: self.head_joint_in_device,
+            ground_truth: self.ground_truth.as_ref().map(|gt| AlignedGroundTruth {
+                poses: gt.poses[start..end].to_vec(),
+                valid: gt.valid[start..end].to_vec(),
+                occluded: gt
+                    .occluded
+                    .iter()
+                    .map(|o| o.get(start..end).map_or_else(|| vec![0; end - start], <[u16]>::to_vec))
+                    .collect(),
+            }),
+            coverage: Vec::new(),
+        }
+    }
+
     /// The tracking mode the wearer's devices allow ([`TrackingMode::for_devices`]): 3-point
     /// when both wrist trajectories exist.
     pub fn tracking_mode(&self) -> TrackingMode {

@@ -352,6 +352,169 @@ pub fn format_table(report: &EvalReport) -> String {
     out
 }
 
+/// The lookaheads `egoexo eval --live` reports (frames).
+pub const LIVE_LOOKAHEADS: [usize; 4] = [0, 4, 8, 16];
+
+/// One row of the live table: a method read out `lookahead` frames before its window's end,
+/// scored against the ground truth, and its distance from the offline reconstruction of the
+/// same frames.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LiveEvalRow {
+    pub method: Method,
+    pub lookahead: usize,
+    #[serde(flatten)]
+    pub metrics: MotionMetrics,
+    /// MPJPE between the live and the offline joints, cm.
+    pub vs_offline_cm: f64,
+    /// MPJPE over the offline result's MPJPE (1.10 = 10 % worse).
+    pub mpjpe_ratio: f64,
+}
+
+/// What `egoexo eval --live` prints.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LiveEvalReport {
+    pub tracking: u8,
+    pub observers: usize,
+    pub subjects: Vec<u32>,
+    pub clips: usize,
+    /// Frames scored (every tracked frame with `max(lookaheads)` frames after it).
+    pub frames: usize,
+    /// The offline reconstruction (overlapping windows, cross-faded: what the page shows after
+    /// "Stop and keep") on the same frames.
+    pub offline: Vec<EvalRow>,
+    pub rows: Vec<LiveEvalRow>,
+}
+
+/// The live reconstruction's accuracy: every frame `f` read out of the 96-frame window ending
+/// at `f + L` (as the page's worker does), for every method of `options` and every `L` of
+/// `lookaheads`; one window per end frame serves every lookahead. `progress(done, total)`
+/// counts clips.
+pub fn evaluate_live(
+    library: &MotionLibrary,
+    engine: &Engine,
+    options: &EvalOptions,
+    lookaheads: &[usize],
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<LiveEvalReport, DatasetError> {
+    let clips = library.clips_of_subjects(&options.subjects);
+    if clips.is_empty() {
+        return Err(DatasetError::Options(format!("no clips of subjects {:?}", options.subjects)));
+    }
+    let max_lookahead = lookaheads.iter().copied().max().unwrap_or(0);
+    if max_lookahead >= WINDOW {
+        return Err(DatasetError::Options(format!("a lookahead must be below {WINDOW} frames")));
+    }
+    let methods = &options.methods;
+    let fail = |e: egoexo_infer::InferError| DatasetError::Reconstruct {
+        method: method_names(methods),
+        message: e.to_string(),
+    };
+    let mut offline_acc: Vec<MetricsAccumulator> = methods.iter().map(|_| MetricsAccumulator::new()).collect();
+    let cell = || -> Vec<Vec<MetricsAccumulator>> {
+        methods.iter().map(|_| lookaheads.iter().map(|_| MetricsAccumulator::new()).collect()).collect()
+    };
+    let (mut live_acc, mut vs_offline_acc) = (cell(), cell());
+    let mut frames = 0;
+    let offline_options = ReconstructOptions { tracking: Some(options.tracking), ..ReconstructOptions::default() };
+    let window_options =
+        ReconstructOptions { tracking: Some(options.tracking), stride: WINDOW, ..ReconstructOptions::default() };
+    for (done, &clip) in clips.iter().enumerate() {
+        let aligned = evaluation_session(library, clip, options.tracking, options.observers, options.seed)?;
+        let gt = aligned.ground_truth.as_ref().ok_or(DatasetError::NoGroundTruth)?;
+        let gt_joints: Vec<_> = gt.poses.iter().map(|p| aligned.skeleton.forward_kinematics(p).positions).collect();
+        let offline = engine.reconstruct_each(&aligned, &offline_options, methods, &mut |_| true).map_err(fail)?;
+        let tracked: Vec<bool> =
+            (0..aligned.timeline.frames).map(|f| aligned.wearer_tracked(f, options.tracking)).collect();
+        for span in valid_spans(&tracked) {
+            if span.len() <= max_lookahead {
+                continue;
+            }
+            let scored = span.start..span.end - max_lookahead;
+            // live[method][lookahead][frame - scored.start]
+            let mut live: Vec<Vec<Vec<[egoexo_core::glam::Vec3; egoexo_core::skeleton::NUM_JOINTS]>>> =
+                vec![vec![Vec::with_capacity(scored.len()); lookaheads.len()]; methods.len()];
+            for end in span.clone() {
+                let start = (end + 1).saturating_sub(WINDOW).max(span.start);
+                let window = aligned.frames_slice(start..end + 1);
+                let results =
+                    engine.reconstruct_each(&window, &window_options, methods, &mut |_| true).map_err(fail)?;
+                for (m, result) in results.iter().enumerate() {
+                    for (l, &lookahead) in lookaheads.iter().enumerate() {
+                        let Some(frame) = end.checked_sub(lookahead) else { continue };
+                        if frame >= start && scored.contains(&frame) {
+                            live[m][l].push(result.joints[frame - start]);
+                        }
+                    }
+                }
+            }
+            frames += scored.len();
+            let truth = &gt_joints[scored.clone()];
+            let fps = aligned.timeline.fps;
+            for (m, result) in offline.iter().enumerate() {
+                let offline_joints = &result.joints[scored.clone()];
+                offline_acc[m].add_segment(offline_joints, truth, fps, None)?;
+                for l in 0..lookaheads.len() {
+                    live_acc[m][l].add_segment(&live[m][l], truth, fps, None)?;
+                    vs_offline_acc[m][l].add_segment(&live[m][l], offline_joints, fps, None)?;
+                }
+            }
+        }
+        progress(done + 1, clips.len());
+    }
+    let mut offline_rows = Vec::new();
+    let mut rows = Vec::new();
+    for (m, &method) in methods.iter().enumerate() {
+        let Some(offline) = offline_acc[m].finish() else { continue };
+        for (l, &lookahead) in lookaheads.iter().enumerate() {
+            let (Some(metrics), Some(vs)) = (live_acc[m][l].finish(), vs_offline_acc[m][l].finish()) else { continue };
+            let mpjpe_ratio = metrics.mpjpe_cm / offline.mpjpe_cm;
+            rows.push(LiveEvalRow { method, lookahead, metrics, vs_offline_cm: vs.mpjpe_cm, mpjpe_ratio });
+        }
+        offline_rows.push(EvalRow { method, metrics: offline });
+    }
+    Ok(LiveEvalReport {
+        tracking: options.tracking.points(),
+        observers: options.observers,
+        subjects: options.subjects.clone(),
+        clips: clips.len(),
+        frames,
+        offline: offline_rows,
+        rows,
+    })
+}
+
+/// The live table (markdown): offline and each lookahead per method.
+pub fn format_live_table(report: &LiveEvalReport) -> String {
+    let mut out = format!(
+        "**live, {}-point tracking, {} observer(s), subjects {:?}: {} clips, {} frames**\n\n",
+        report.tracking, report.observers, report.subjects, report.clips, report.frames
+    );
+    out.push_str("| method | lookahead | latency ≥ | MPJPE | L-PE | Jitter | vs offline | MPJPE / offline |\n");
+    out.push_str("|---|---|---|---|---|---|---|---|\n");
+    for offline in &report.offline {
+        let m = &offline.metrics;
+        out.push_str(&format!(
+            "| {} | offline | – | {:.2} | {:.2} | {:.2} | – | 1.00 |\n",
+            offline.method, m.mpjpe_cm, m.lower_cm, m.jitter
+        ));
+        for row in report.rows.iter().filter(|r| r.method == offline.method) {
+            let m = &row.metrics;
+            out.push_str(&format!(
+                "| {} | {} | {:.0} ms | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |\n",
+                row.method,
+                row.lookahead,
+                row.lookahead as f64 * 1000.0 / 30.0,
+                m.mpjpe_cm,
+                m.lower_cm,
+                m.jitter,
+                row.vs_offline_cm,
+                row.mpjpe_ratio
+            ));
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -3,7 +3,9 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use egoexo_dataset::eval::{EvalOptions, evaluate, format_table, nearest_neighbour_index};
+use egoexo_dataset::eval::{
+    EvalOptions, LIVE_LOOKAHEADS, evaluate, evaluate_live, format_live_table, format_table, nearest_neighbour_index,
+};
 use egoexo_infer::{Engine, Method};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -20,6 +22,13 @@ pub struct Args {
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// The live table instead: ego-only and ego-exo read out each lookahead before their
+    /// window's end, as the page reconstructs live, against the offline result (needs --models).
+    #[arg(long)]
+    pub live: bool,
+    /// Lookaheads of the live table, frames.
+    #[arg(long, value_delimiter = ',', default_values_t = LIVE_LOOKAHEADS)]
+    pub lookaheads: Vec<usize>,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -30,15 +39,25 @@ pub fn run(args: Args) -> Result<()> {
     if training.is_empty() {
         bail!("every subject of the library is being evaluated; the nearest-neighbour baseline needs other subjects");
     }
-    let mut engine = Engine::new()
-        .with_nearest_neighbour(tracking, nearest_neighbour_index(&library, &training, tracking, sim.seed, 2)?);
-    let mut methods = vec![Method::RestPose, Method::NearestNeighbour];
+    let mut engine = Engine::new();
+    let mut methods = Vec::new();
+    if !args.live {
+        engine = engine
+            .with_nearest_neighbour(tracking, nearest_neighbour_index(&library, &training, tracking, sim.seed, 2)?);
+        methods.extend([Method::RestPose, Method::NearestNeighbour]);
+    }
     if let Some(dir) = &args.models {
         let manifest = read_manifest(dir)?;
         let set = load_model_set(dir, &manifest, tracking)?
             .with_context(|| format!("{} has no {}-point models", dir.display(), tracking.points()))?;
         engine = engine.with_models(set);
         methods.extend([Method::EgoOnly, Method::EgoExo, Method::EgoExoUngated]);
+    }
+    if args.live {
+        if args.models.is_none() {
+            bail!("--live compares the networks' live and offline results: pass --models DIR");
+        }
+        methods = vec![Method::EgoOnly, Method::EgoExo];
     }
     let options =
         EvalOptions { subjects: sim.subjects.clone(), observers: sim.observers, tracking, seed: sim.seed, methods };
@@ -47,6 +66,19 @@ pub fn run(args: Args) -> Result<()> {
         ProgressStyle::with_template("eval {bar:40} {pos}/{len} clips [{elapsed_precise}]")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
+    if args.live {
+        let report = evaluate_live(&library, &engine, &options, &args.lookaheads, &mut |done, total| {
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+        })?;
+        bar.finish_and_clear();
+        if args.json {
+            println!("{}", serde_json::to_string(&report)?);
+        } else {
+            print!("{}", format_live_table(&report));
+        }
+        return Ok(());
+    }
     let report = evaluate(&library, &engine, &options, &mut |done, total| {
         bar.set_length(total as u64);
         bar.set_position(done as u64);

@@ -69,7 +69,7 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
     $('live-start').disabled = true;
     $('live-mode').textContent = 'connecting to the relay…';
     document.body.dataset.state = 'live';
-    state.client.live_join(relayUrl(), room, secret, Number($('live-lookahead').value));
+    state.client.live_join(relayUrl(), room, secret, Number($('live-lookahead').value || 4));
   }
 
   async function start() {
@@ -238,15 +238,35 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
     }
   }
 
-  function wire() {
+  // The lookahead choices with the eval's figures beside each (ego-exo, 1 observer), and the
+  // default the eval picked: the smallest within 10 % of the offline MPJPE.
+  async function fillLookaheads() {
     const select = $('live-lookahead');
+    let figures = null;
+    try {
+      const response = await fetch(new URL('live-lookahead.json', import.meta.url));
+      if (response.ok) figures = await response.json();
+    } catch {
+      // No figures in this build: plain choices.
+    }
     select.replaceChildren(...LOOKAHEADS.map((l) => {
       const option = document.createElement('option');
       option.value = String(l);
-      option.textContent = `${l} frames (≥ ${Math.round((l * 1000) / 30)} ms)`;
+      const per = Object.entries(figures?.tracking ?? {}).flatMap(([mode, methods]) => {
+        const row = methods['ego-exo']?.[String(l)];
+        return row ? [`${mode} ${row.mpjpe_cm.toFixed(1)} cm (${row.ratio.toFixed(2)}× offline)`] : [];
+      });
+      option.textContent = `${l} frames (≥ ${Math.round((l * 1000) / 30)} ms)${per.length ? ` — MPJPE ${per.join(', ')}` : ''}`;
       return option;
     }));
-    select.value = '8';
+    const chosen = String(figures?.default ?? 4);
+    select.value = chosen;
+    if (live.joined) state.client.live_lookahead(Number(chosen));
+  }
+
+  function wire() {
+    const select = $('live-lookahead');
+    fillLookaheads();
     select.addEventListener('change', () => state.client.live_lookahead(Number(select.value)));
     $('live-start').addEventListener('click', start);
     $('live-keep').addEventListener('click', () => stop(true));

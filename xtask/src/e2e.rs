@@ -125,6 +125,37 @@ fn parse_bench_line(out: &str, prefix: &str) -> Result<BenchResult> {
     })
 }
 
+/// Serves `dist/` and runs the live bench (`tests/e2e/live-bench.mjs`): the page in Live
+/// mode fed by `egoexo live replay`, `seconds` at each lookahead. Returns its `LIVEBENCH`
+/// JSON.
+pub fn run_live_bench(root: &Path, run: &BrowserRun, seconds: u32) -> Result<serde_json::Value> {
+    std::fs::create_dir_all(&run.out)?;
+    let server = run.serve(root)?;
+    let script = root.join("tests").join("e2e").join("live-bench.mjs");
+    let out = cmd::output_checked(run.node(root, &server.url).arg(&script).arg(seconds.to_string()))?;
+    let line = out
+        .lines()
+        .rev()
+        .find_map(|l| l.strip_prefix("LIVEBENCH "))
+        .context("the live bench printed no LIVEBENCH line")?;
+    serde_json::from_str(line).with_context(|| format!("LIVEBENCH result `{line}`"))
+}
+
+/// The relay under load on loopback (`egoexo live load`, which starts its own server):
+/// `streams` device streams (10 rooms) at 30 Hz for `seconds`. Returns its JSON report.
+pub fn run_relay_load(root: &Path, streams: usize, seconds: u32) -> Result<serde_json::Value> {
+    let bin = root.join("target").join("debug").join("egoexo");
+    let rooms = 10.min(streams.max(1));
+    let out = cmd::output_checked(
+        Command::new(bin)
+            .args(["live", "load", "--rooms", &rooms.to_string(), "--devices-per-room"])
+            .arg((streams / rooms).max(1).to_string())
+            .args(["--duration-s", &seconds.to_string()]),
+    )?;
+    let line = out.lines().last().context("egoexo live load printed nothing")?;
+    serde_json::from_str(line).with_context(|| format!("egoexo live load printed `{line}`"))
+}
+
 /// The bench's native reference: the same sample, models and jobs timed natively (release
 /// build of `crates/egoexo-web-worker/examples/bench_native.rs`).
 pub fn run_native_reference(root: &Path, models: &Path, runs: u32) -> Result<BenchResult> {

@@ -30,6 +30,11 @@ const WASM_APP_PROFILE_TEST_TARGETS: &[(&str, &str)] =
 
 /// Timed reconstructions of the bench page during `cargo xtask test` (a figure, not a check).
 const TEST_BENCH_RUNS: u32 = 3;
+/// Seconds of the live bench at each lookahead during `cargo xtask test`.
+const TEST_LIVE_BENCH_SECONDS: u32 = 6;
+/// The short version of the relay load benchmark (the long one: `egoexo live load
+/// --duration-s 600`).
+const TEST_RELAY_LOAD_SECONDS: u32 = 10;
 
 /// Chromium flags for a closed network and a root user (see shared/notes/toolchain.md);
 /// wasm-bindgen-test-runner adds `headless` and `no-sandbox` itself.
@@ -184,6 +189,36 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
             "bench page ({} frames, median of {}): {:.0} frames/s ego-exo, {:.0} frames/s whole app job",
             b.frames, b.runs, b.median_fps, b.median_app_fps
         );
+        println!("live in the browser (glass-to-skeleton latency, worker ms per frame):");
+        for row in app.live["rows"].as_array().into_iter().flatten() {
+            let n = |k: &str| row[k].as_f64().map_or("–".to_string(), |v| format!("{v:.0}"));
+            println!(
+                "  lookahead {:>2}: p50 {} ms, p95 {} ms (goal ≤ {} ms: {}), worker {} ms/frame, {} frames",
+                row["lookahead"],
+                n("latency_p50_ms"),
+                n("latency_p95_ms"),
+                n("goal_p95_ms"),
+                if row["meets_goal"].as_bool() == Some(true) { "met" } else { "missed" },
+                n("worker_ms_per_frame"),
+                row["frames"],
+            );
+        }
+        let r = &app.relay;
+        println!(
+            "relay load: {} streams × {} Hz, {} viewers: {} of {} frames received, {} lost, {} dropped; latency p50 {:.2} / p95 {:.2} / p99 {:.2} ms; relay CPU {:.1} %, peak {:.1} MiB",
+            r["device_streams"],
+            r["hz"],
+            r["viewers"],
+            r["frames_received"],
+            r["frames_expected"],
+            r["frames_lost"],
+            r["dropped_by_relay"],
+            r["latency_ms"]["p50"].as_f64().unwrap_or(f64::NAN),
+            r["latency_ms"]["p95"].as_f64().unwrap_or(f64::NAN),
+            r["latency_ms"]["p99"].as_f64().unwrap_or(f64::NAN),
+            r["relay"]["cpu_percent"].as_f64().unwrap_or(f64::NAN),
+            r["relay"]["rss_peak_mib"].as_f64().unwrap_or(f64::NAN),
+        );
         web::print_sizes(&app.sizes);
     }
     println!("phases (wall clock):");
@@ -196,6 +231,10 @@ struct WebAppRun {
     sizes: Vec<web::ModuleSize>,
     e2e: TestCounts,
     bench: e2e::BenchResult,
+    /// `tests/e2e/live-bench.mjs`'s result.
+    live: serde_json::Value,
+    /// `egoexo live load`'s report.
+    relay: serde_json::Value,
 }
 
 /// Builds `dist/` (models from `models/` or `EGOEXO_MODELS`), then runs the Playwright suite
@@ -208,7 +247,10 @@ fn run_web_app(root: &Path, t: &tools::BrowserTestTools, phases: &mut Phases) ->
     let run = e2e::BrowserRun { chromium: t.chromium.clone(), out: root.join("target").join("e2e") };
     let e2e = phases.time("web app: end to end (Playwright)", || e2e::run_suite(root, &run))?;
     let bench = phases.time("web app: bench page", || e2e::run_bench(root, &run, TEST_BENCH_RUNS))?;
-    Ok(WebAppRun { sizes, e2e, bench })
+    let live = phases.time("web app: live bench", || e2e::run_live_bench(root, &run, TEST_LIVE_BENCH_SECONDS))?;
+    let relay =
+        phases.time("relay load (50 streams × 30 Hz)", || e2e::run_relay_load(root, 50, TEST_RELAY_LOAD_SECONDS))?;
+    Ok(WebAppRun { sizes, e2e, bench, live, relay })
 }
 
 /// The WebDriver capabilities file: Debian's Chromium binary and the flags it needs here.

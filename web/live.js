@@ -19,6 +19,7 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
     frames: 0, // live frames drawn
     latencies: [], // ms, the last LATENCY_WINDOW
     computeMs: [], // ms the worker took per live frame, the last LATENCY_WINDOW
+    arrivals: [], // ms from the frame's time to its arrival in the page (before drawing)
     offsetMs: null, // relay clock − worker clock
     modes: new Set(), // methods seen (ego-exo, ego-only)
     devices: [],
@@ -183,7 +184,12 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
       : info.method === 'ego-only' ? 'ego-only: no observer sees the wearer now (none connected, or no keypoints)'
         : `ego-exo${who}`;
     $('live-mode').dataset.method = info.method;
-    // Latency: when the frame is on screen (the viewer draws in this animation frame).
+    // Latency: when the frame reached the page, and when it is on screen (the viewer draws in
+    // this animation frame).
+    if (live.offsetMs !== null) {
+      live.arrivals.push(performance.timeOrigin + performance.now() + live.offsetMs - info.timestamp_ms);
+      if (live.arrivals.length > LATENCY_WINDOW) live.arrivals.shift();
+    }
     requestAnimationFrame(() => {
       if (live.offsetMs === null) return;
       const nowRelayMs = performance.timeOrigin + performance.now() + live.offsetMs;

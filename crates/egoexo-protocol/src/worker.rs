@@ -438,7 +438,7 @@ pub struct LiveTakeSummary {
 /// A live frame's facts (beside its scene).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LiveFrameInfo {
-    /// The frame on the take's 30 fps grid.
+    /// The frame's number, at 30 fps from the take's first head pose.
     pub frame: usize,
     /// When it happened, relay clock, Unix milliseconds.
     pub timestamp_ms: f64,

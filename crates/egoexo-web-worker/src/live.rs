@@ -1,12 +1,13 @@
 //! Live reconstruction of a take as it streams in (plain Rust; the browser's message loop
 //! feeds it from the relay's socket, the native tests from a recorded session).
 //!
-//! Frames from the relay go into a [`LiveTake`] (relay clock, every device on it). The take is
-//! read on a fixed grid at the models' rate, frame 0 at the wearer's first head pose, so a
-//! frame keeps its time from one window to the next. To show frame `f` with lookahead `L`,
-//! the engine runs on the window of [`WINDOW`] frames ending at `f + L` (fewer at the start
-//! of a take) and `f` is read out of it: `f` can be shown once the head has reached
-//! `f + L`, so the delay is at least `L` frames. Each call shows the newest frame that can
+//! Frames from the relay go into a [`LiveTake`] (relay clock, every device on it). Frames are
+//! numbered at the models' rate from the wearer's first head pose. A window ends at the newest
+//! head pose — the frame it is nearest to — with its [`WINDOW`] frames (fewer at the start
+//! of a take) at the models' rate before it, so reading out never waits for the head's next
+//! sample (device clocks drift, so a fixed grid would fall just after the newest sample half
+//! the time). To show frame `f` with lookahead `L`, the engine runs on the window ending at
+//! `f + L` and `f` is read out of it, so the delay is at least `L` frames. Each call shows the newest frame that can
 //! be shown; frames passed over while the worker was busy are counted, never queued, so
 //! what is drawn is never stale. A gap in the head stream is a gap in the take (alignment
 //! marks its frames invalid); nothing is repeated or invented.
@@ -15,7 +16,7 @@ use std::ops::Range;
 
 use egoexo_core::aligned::Timeline;
 use egoexo_infer::windows::WINDOW;
-use egoexo_infer::{Engine, InferError, Method, ReconstructOptions};
+use egoexo_infer::{Engine, InferError, Method, ObserverGates, ReconstructOptions, Reconstruction};
 use egoexo_protocol::live::{DataFrame, RelayMessage};
 use egoexo_protocol::worker::{LiveFrameInfo, LiveTakeSummary};
 use egoexo_session::align::{AlignError, AlignOptions, align_on_timeline};
@@ -131,15 +132,15 @@ impl LiveReconstructor {
         1e9 / f64::from(self.fps)
     }
 
-    /// The grid's frame 0 and the newest frame the head has reached.
-    fn grid(&self) -> Option<(i64, usize)> {
+    /// The newest head pose's time and the frame it is nearest to.
+    fn newest(&self) -> Option<(i64, usize)> {
         let (first, last) = self.take.head_range_ns()?;
-        Some((first, ((last - first) as f64 / self.frame_ns() + 1e-6).floor() as usize))
+        Some((last, ((last - first) as f64 / self.frame_ns()).round() as usize))
     }
 
     /// The newest frame that can be shown now, if it is newer than the last one shown.
     pub fn next_frame(&self) -> Option<usize> {
-        let (_, reached) = self.grid()?;
+        let (_, reached) = self.newest()?;
         let frame = reached.checked_sub(self.lookahead)?;
         (self.last_shown.is_none_or(|last| frame > last)).then_some(frame)
     }
@@ -148,7 +149,7 @@ impl LiveReconstructor {
     /// or `None` when there is nothing new.
     pub fn reconstruct_next(&mut self, engine: &Engine) -> Result<Option<LiveFrame>, LiveError> {
         let Some(frame) = self.next_frame() else { return Ok(None) };
-        let Some((origin, _)) = self.grid() else { return Ok(None) };
+        let Some((newest_ns, _)) = self.newest() else { return Ok(None) };
         // The frame counts as shown even if it fails below, so a failing window is not retried.
         let skipped = self.last_shown.map_or(0, |last| frame - last - 1);
         self.last_shown = Some(frame);
@@ -156,7 +157,7 @@ impl LiveReconstructor {
         let end = frame + self.lookahead;
         let start = (end + 1).saturating_sub(WINDOW);
         let timeline = Timeline {
-            start_ns: origin + (start as f64 * self.frame_ns()).round() as i64,
+            start_ns: newest_ns - ((end - start) as f64 * self.frame_ns()).round() as i64,
             fps: self.fps,
             frames: end + 1 - start,
         };
@@ -173,7 +174,22 @@ impl LiveReconstructor {
         let method = if has_exo { Method::EgoExo } else { Method::EgoOnly };
         let options = ReconstructOptions { method, stride: WINDOW, ..ReconstructOptions::default() };
         let recon = engine.reconstruct(&aligned, &options, &mut |_| true)?;
-        let scene = crate::scene::build_scene(&aligned, &recon, None).frames_slice(index..index + 1);
+        // The scene of the one frame shown (its rays only), on the window's floor (the lowest
+        // foot over the window: steady while the feet lift).
+        let one = index..index + 1;
+        let frame_recon = Reconstruction {
+            joints: recon.joints[one.clone()].to_vec(),
+            valid: recon.valid[one.clone()].to_vec(),
+            exo_evidence: recon.exo_evidence[one.clone()].to_vec(),
+            gates: recon
+                .gates
+                .iter()
+                .map(|g| ObserverGates { observer_id: g.observer_id.clone(), gates: g.gates[one.clone()].to_vec() })
+                .collect(),
+            ..recon.clone()
+        };
+        let mut scene = crate::scene::build_scene(&aligned.frames_slice(one), &frame_recon, None);
+        scene.floor_y = crate::scene::floor_y(&recon.joints, &recon.valid);
         scene.check().map_err(LiveError::Scene)?;
         let exo_observers = recon
             .gates

@@ -90,14 +90,17 @@ pub fn build_scene(aligned: &AlignedSession, recon: &Reconstruction, ego_only: O
             rays,
         });
     }
-    scene.floor_y = recon.joints[..frames]
+    scene.floor_y = floor_y(&recon.joints[..frames], &recon.valid);
+    scene
+}
+
+/// The floor's height: the lowest ankle or foot joint over the tracked frames (0 without any).
+pub fn floor_y(joints: &[[Vec3; NUM_JOINTS]], valid: &[bool]) -> f32 {
+    let y = joints
         .iter()
-        .zip(&recon.valid)
+        .zip(valid)
         .filter(|(_, v)| **v)
         .flat_map(|(j, _)| [7, 8, 10, 11].map(|k| j[k].y))
         .fold(f32::INFINITY, f32::min);
-    if !scene.floor_y.is_finite() {
-        scene.floor_y = 0.0;
-    }
-    scene
+    if y.is_finite() { y } else { 0.0 }
 }

@@ -69,7 +69,7 @@ fn as_relay(session: &Session, observers: bool) -> (Vec<RelayMessage>, Vec<DataF
 }
 
 #[test]
-fn a_streamed_take_is_shown_frame_by_frame_on_one_grid_and_kept() {
+fn a_streamed_take_is_shown_frame_by_frame_at_the_models_rate_and_kept() {
     let mut worker = worker();
     let session = session();
     let (messages, frames) = as_relay(&session, true);
@@ -97,7 +97,8 @@ fn a_streamed_take_is_shown_frame_by_frame_on_one_grid_and_kept() {
     for f in &shown {
         assert_eq!(f.window.end, f.frame + lookahead + 1);
         assert!(f.window.len() <= 96 && f.window.contains(&f.frame));
-        assert_eq!(f.timestamp_ns, first + (f.frame as f64 * 1e9 / 30.0).round() as i64);
+        let on_grid = first + (f.frame as f64 * 1e9 / 30.0).round() as i64;
+        assert!((f.timestamp_ns - on_grid).abs() < 1_000_000, "frame {} at {} ns", f.frame, f.timestamp_ns);
         assert!(f.tracked);
         assert!(f.exo_observers.is_empty() || f.method == Method::EgoExo);
         let scene: SceneData = serde_json::from_slice(&f.scene_json).unwrap();

@@ -8,6 +8,7 @@
 
 import assert from 'node:assert/strict';
 import { spawn } from 'node:child_process';
+import { readFileSync } from 'node:fs';
 import { after, before, describe, test } from 'node:test';
 
 import { APP_URL, decodePng, launch, openApp, skeletonPixels } from './browser.mjs';
@@ -152,6 +153,14 @@ describe('live capture', () => {
     const summary = await app.page.evaluate(() => window.egoexo.session);
     assert.ok(summary.frames >= 355 && summary.frames <= 365, `${summary.frames} frames for 12 s`);
     assert.equal(summary.observers.length, 2);
+    // … and saves as a .egoexo session with every device.
+    const [download] = await Promise.all([app.page.waitForEvent('download'), app.page.getByRole('button', { name: 'Save .egoexo' }).click()]);
+    assert.match(download.suggestedFilename(), /^live_take.*\.egoexo$/);
+    const saved = readFileSync(await download.path());
+    assert.equal(saved.subarray(0, 2).toString(), 'PK');
+    for (const name of ['session.json', 'observers/observer-1/', 'observers/observer-2/', 'wearer/left_wrist/']) {
+      assert.ok(saved.includes(Buffer.from(name)), `the saved take has ${name}`);
+    }
     assert.deepEqual(app.errors, []);
     assert.deepEqual(watcher.errors, []);
     await watcher.close();

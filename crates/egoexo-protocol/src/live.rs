@@ -65,6 +65,16 @@ impl Stream {
         Stream::ALL.into_iter().find(|s| s.channel() == channel)
     }
 
+    /// Its name on the wire (`head`, `left-wrist`, `right-wrist`, `keypoints`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Stream::Head => "head",
+            Stream::LeftWrist => "left-wrist",
+            Stream::RightWrist => "right-wrist",
+            Stream::Keypoints => "keypoints",
+        }
+    }
+
     /// The frame kind the stream carries.
     pub fn op(self) -> FrameOp {
         match self {
@@ -85,6 +95,14 @@ pub enum DeviceRole {
 }
 
 impl DeviceRole {
+    /// Its name on the wire (`wearer`, `observer`).
+    pub fn name(self) -> &'static str {
+        match self {
+            DeviceRole::Wearer => "wearer",
+            DeviceRole::Observer => "observer",
+        }
+    }
+
     /// The streams this role may publish.
     pub fn allows(self, stream: Stream) -> bool {
         match self {
@@ -102,6 +120,42 @@ pub enum Join {
     Secret { room: RoomId, secret: String },
     /// The short device code a person types on a headset.
     Code { code: String },
+}
+
+/// Why what a person typed or pasted is not a way into a room.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum JoinParseError {
+    #[error("Type the device code shown where the room was made (like 7KQ-M4T), or open the device link.")]
+    Empty,
+    #[error(
+        "“{0}” is not a device code: a code is six characters, digits 2–9 and letters A–Z without I, L or O (like 7KQ-M4T)."
+    )]
+    BadCode(String),
+    #[error(
+        "This link's #live=… part is damaged: it should be #live=<room>.<secret>. Copy the whole device link again."
+    )]
+    BadLink,
+}
+
+impl Join {
+    /// A join from what a person typed or pasted: a device code (`7kq m4t` is fine), a link
+    /// with `#live=<room>.<secret>`, or a bare `<room>.<secret>`.
+    pub fn parse(text: &str) -> Result<Join, JoinParseError> {
+        let text = text.trim();
+        if text.is_empty() {
+            return Err(JoinParseError::Empty);
+        }
+        if let Some(code) = normalize_code(text) {
+            return Ok(Join::Code { code: display_code(&code) });
+        }
+        // A link, or a room and secret pasted bare (both 22 characters; a code is never that long).
+        let bare_link = text.split_once('.').is_some_and(|(room, secret)| room.len() >= 16 && secret.len() >= 16);
+        if text.contains('#') || text.contains("live=") || bare_link {
+            let link = LiveLink::parse(text).ok_or(JoinParseError::BadLink)?;
+            return Ok(Join::Secret { room: link.room, secret: link.secret });
+        }
+        Err(JoinParseError::BadCode(text.chars().take(24).collect()))
+    }
 }
 
 /// A device introducing itself.
@@ -513,7 +567,11 @@ impl LiveLink {
     /// parameters are ignored). Room and secret are base64url, 1–64 characters each.
     pub fn parse_fragment(fragment: &str) -> Option<LiveLink> {
         let fragment = fragment.strip_prefix('#').unwrap_or(fragment);
-        let value = fragment.split('&').find_map(|part| part.strip_prefix("live="))?;
+        Self::parse_value(fragment.split('&').find_map(|part| part.strip_prefix("live="))?)
+    }
+
+    /// The value of a `live=` parameter: `<room>.<secret>`.
+    pub fn parse_value(value: &str) -> Option<LiveLink> {
         let (room, secret) = value.split_once('.')?;
         let ok = |s: &str| {
             (1..=64).contains(&s.len()) && s.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
@@ -525,7 +583,7 @@ impl LiveLink {
     pub fn parse(text: &str) -> Option<LiveLink> {
         match text.split_once('#') {
             Some((_, fragment)) => Self::parse_fragment(fragment),
-            None => Self::parse_fragment(&format!("live={text}")),
+            None => Self::parse_value(text),
         }
     }
 }
@@ -591,6 +649,28 @@ mod tests {
             let err = DataFrame::decode(&bytes).unwrap_err().to_string();
             assert!(err.contains(needle), "{needle}: {err}");
         }
+    }
+
+    #[test]
+    fn names_are_the_wire_names() {
+        for stream in Stream::ALL {
+            assert_eq!(serde_json::to_value(stream).unwrap(), stream.name());
+        }
+        for role in [DeviceRole::Wearer, DeviceRole::Observer] {
+            assert_eq!(serde_json::to_value(role).unwrap(), role.name());
+        }
+    }
+
+    #[test]
+    fn codes_and_links_become_joins() {
+        assert_eq!(Join::parse(" 7kq m4t ").unwrap(), Join::Code { code: "7KQ-M4T".into() });
+        let (room, secret) = ("Xq3wZkAbCdEfGhIjKlMnOp", "s3cr3t-s3cr3t_s3cr3t-x");
+        let expected = Join::Secret { room: room.into(), secret: secret.into() };
+        assert_eq!(Join::parse(&format!("https://h.example/xr.html#live={room}.{secret}")).unwrap(), expected);
+        assert_eq!(Join::parse(&format!("{room}.{secret}")).unwrap(), expected);
+        assert_eq!(Join::parse("  "), Err(JoinParseError::Empty));
+        assert_eq!(Join::parse("7KQ-M40"), Err(JoinParseError::BadCode("7KQ-M40".into())));
+        assert_eq!(Join::parse("https://h/xr.html#live=a.b<c"), Err(JoinParseError::BadLink));
     }
 
     #[test]

@@ -283,11 +283,13 @@ impl fmt::Display for LinkTime {
     }
 }
 
-/// The part of a page address after `#`: `share=<id>.<key>`, `t=<time>` and the flag `sample`
-/// (open the sample), `&`-separated; other parameters are kept as they are.
+/// The part of a page address after `#`: `share=<id>.<key>`, `live=<room>.<secret>` (a live
+/// room to watch), `t=<time>` and the flag `sample` (open the sample), `&`-separated; other
+/// parameters are kept as they are.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct LinkFragment {
     pub share: Option<(ShareId, ShareKey)>,
+    pub live: Option<crate::live::LiveLink>,
     pub time: Option<LinkTime>,
     pub sample: bool,
     /// Parameters this version does not know, in order.
@@ -305,6 +307,11 @@ impl LinkFragment {
                         value.split_once('.').ok_or_else(|| format!("`share={value}`: expected <id>.<key>"))?;
                     out.share = Some((ShareId::parse(id)?, ShareKey::decode(key)?));
                 }
+                Some(("live", value)) => {
+                    let link = crate::live::LiveLink::parse_value(value)
+                        .ok_or_else(|| format!("`live={value}`: expected <room>.<secret>"))?;
+                    out.live = Some(link);
+                }
                 Some(("t", value)) => out.time = Some(LinkTime::parse(value)?),
                 None if param == "sample" => out.sample = true,
                 _ => out.other.push(param.to_owned()),
@@ -320,6 +327,9 @@ impl fmt::Display for LinkFragment {
         let mut params: Vec<String> = Vec::new();
         if let Some((id, key)) = &self.share {
             params.push(format!("share={id}.{}", key.encode()));
+        }
+        if let Some(live) = &self.live {
+            params.push(live.fragment());
         }
         if self.sample {
             params.push("sample".into());
@@ -426,6 +436,11 @@ mod tests {
         assert_eq!(moment.to_string(), "sample&t=12.346");
         assert_eq!(LinkFragment::parse("").unwrap(), LinkFragment::default());
         assert_eq!(LinkFragment::parse("#x=1&t=2").unwrap().to_string(), "x=1&t=2");
+        // A watch link's room, and a damaged one.
+        let watch = LinkFragment::parse("#live=Ab-_9.s3cr3t").unwrap();
+        assert_eq!(watch.live.as_ref().map(|l| (l.room.as_str(), l.secret.as_str())), Some(("Ab-_9", "s3cr3t")));
+        assert_eq!(watch.to_string(), "live=Ab-_9.s3cr3t");
+        assert!(LinkFragment::parse("#live=abc").unwrap_err().contains("<room>.<secret>"));
     }
 
     #[test]

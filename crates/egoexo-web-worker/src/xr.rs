@@ -15,8 +15,8 @@
 
 use egoexo_core::xr::{Hand, XrPose, XrPoseError, XrSpace, session_pose};
 use egoexo_protocol::live::{
-    ClientMessage, CloseKind, DataFrame, DeviceHello, DeviceRole, FramePayload, Join, LIVE_PROTOCOL_VERSION, LiveLink,
-    RelayMessage, Stream, display_code, normalize_code, valid_device_id,
+    ClientMessage, CloseKind, DataFrame, DeviceHello, DeviceRole, FramePayload, Join, JoinParseError,
+    LIVE_PROTOCOL_VERSION, LiveLink, RelayMessage, Stream, valid_device_id,
 };
 
 /// The XR space a pose comes from, and so the stream it goes to.
@@ -62,16 +62,8 @@ pub const XR_STREAMS: [Stream; 3] = [Stream::Head, Stream::LeftWrist, Stream::Ri
 /// What the page did wrong, in words for the person holding the headset.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum XrError {
-    #[error("Type the device code shown where the room was made (like 7KQ-M4T), or open the device link.")]
-    NoJoin,
-    #[error(
-        "“{0}” is not a device code: a code is six characters, digits 2–9 and letters A–Z without I, L or O (like 7KQ-M4T)."
-    )]
-    BadCode(String),
-    #[error(
-        "This link's #live=… part is damaged: it should be #live=<room>.<secret>. Copy the whole device link again."
-    )]
-    BadLink,
+    #[error(transparent)]
+    Join(#[from] JoinParseError),
     #[error("“{0}” cannot be a device id: use 1–64 letters, digits, '.', '_' or '-'.")]
     BadDeviceId(String),
     #[error("a {what} needs {expected} numbers, got {got}")]
@@ -136,24 +128,9 @@ pub fn pose_frame(
     Ok(DataFrame { channel: source.stream().channel(), timestamp_ns, payload: FramePayload::Pose(pose) }.encode())
 }
 
-/// A join from what a person typed: a device code (`7kq m4t` is fine), a device link, or a
-/// bare `<room>.<secret>`.
+/// A join from what a person typed ([`Join::parse`]).
 pub fn parse_join(text: &str) -> Result<Join, XrError> {
-    let text = text.trim();
-    if text.is_empty() {
-        return Err(XrError::NoJoin);
-    }
-    if let Some(code) = normalize_code(text) {
-        return Ok(Join::Code { code: display_code(&code) });
-    }
-    // A link, or a room and secret pasted bare (both 22 characters; a code is never that long).
-    let bare_link = text.split_once('.').is_some_and(|(room, secret)| room.len() >= 16 && secret.len() >= 16);
-    if text.contains('#') || text.contains("live=") || bare_link {
-        let link = LiveLink::parse(text).ok_or(XrError::BadLink)?;
-        return Ok(Join::Secret { room: link.room, secret: link.secret });
-    }
-    let shown: String = text.chars().take(24).collect();
-    Err(XrError::BadCode(shown))
+    Ok(Join::parse(text)?)
 }
 
 /// The join in the page's address fragment (`location.hash`): `None` without `live=`, an
@@ -162,7 +139,7 @@ pub fn fragment_join(fragment: &str) -> Result<Option<Join>, XrError> {
     if !fragment.contains("live=") {
         return Ok(None);
     }
-    let link = LiveLink::parse_fragment(fragment).ok_or(XrError::BadLink)?;
+    let link = LiveLink::parse_fragment(fragment).ok_or(JoinParseError::BadLink)?;
     Ok(Some(Join::Secret { room: link.room, secret: link.secret }))
 }
 
@@ -357,8 +334,8 @@ mod tests {
         assert!(parse_join("  ").unwrap_err().to_string().contains("Type the device code"));
         let err = parse_join("7KQ-M40").unwrap_err().to_string();
         assert!(err.contains("“7KQ-M40” is not a device code") && err.contains("without I, L or O"), "{err}");
-        assert_eq!(fragment_join("#live=abc").unwrap_err(), XrError::BadLink);
-        assert_eq!(parse_join("https://h/xr.html#live=a.b<c").unwrap_err(), XrError::BadLink);
+        assert_eq!(fragment_join("#live=abc").unwrap_err(), XrError::Join(JoinParseError::BadLink));
+        assert_eq!(parse_join("https://h/xr.html#live=a.b<c").unwrap_err(), XrError::Join(JoinParseError::BadLink));
     }
 
     #[test]

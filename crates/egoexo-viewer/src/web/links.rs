@@ -37,23 +37,14 @@ fn parse(fragment: &str) -> Result<LinkFragment, JsError> {
 /// share or time.
 #[wasm_bindgen]
 pub fn parse_fragment(fragment: &str) -> Result<JsValue, JsError> {
-    let serializer = serde_wasm_bindgen::Serializer::json_compatible();
-    if let Some(link) = LiveLink::parse_fragment(fragment) {
-        let live = Some(LiveRef { room: link.room, secret: link.secret });
-        let value = Fragment { share: None, live, time: None, sample: false };
-        return value.serialize(&serializer).map_err(|e| JsError::new(&e.to_string()));
-    }
-    if fragment.trim_start_matches('#').starts_with("live=") {
-        return Err(JsError::new("the address is not a valid live link: expected #live=<room>.<secret>"));
-    }
     let parsed = parse(fragment)?;
     let value = Fragment {
-        live: None,
+        live: parsed.live.map(|link| LiveRef { room: link.room, secret: link.secret }),
         share: parsed.share.map(|(id, key)| ShareRef { id: id.to_string(), key: key.encode() }),
         time: parsed.time,
         sample: parsed.sample,
     };
-    value.serialize(&serializer).map_err(|e| JsError::new(&e.to_string()))
+    value.serialize(&serde_wasm_bindgen::Serializer::json_compatible()).map_err(|e| JsError::new(&e.to_string()))
 }
 
 /// The fragment of a live link (without `#`): `live=<room>.<secret>` — with the viewer secret

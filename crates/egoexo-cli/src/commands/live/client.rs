@@ -52,15 +52,9 @@ impl ServerAddress {
 }
 
 /// How a command names a room: a device code (`7KQ-M4T`) or a link (`https://host/#live=…`,
-/// or bare `<room>.<secret>`).
+/// or bare `<room>.<secret>`); [`Join::parse`].
 pub fn parse_join(text: &str) -> Result<Join> {
-    if let Some(link) = LiveLink::parse(text) {
-        return Ok(Join::Secret { room: link.room, secret: link.secret });
-    }
-    if let Some(code) = egoexo_protocol::live::normalize_code(text) {
-        return Ok(Join::Code { code: egoexo_protocol::live::display_code(&code) });
-    }
-    bail!("`{text}`: expected a device code like 7KQ-M4T or a link with #live=<room>.<secret>")
+    Join::parse(text).with_context(|| format!("--room `{text}`"))
 }
 
 /// `POST /api/live/rooms`.
@@ -127,6 +121,32 @@ pub async fn hello(socket: &mut Socket, hello: &ClientMessage, clock_ns: impl Fn
             Some(Ok(_)) => {}
             Some(Err(e)) => bail!("the relay's socket: {e}"),
             None => bail!("the relay closed the connection before welcoming"),
+        }
+    }
+}
+
+/// A device waiting to send its next frame: answers the relay's clock pings with `clock_ns`
+/// until `at`; an error if the relay closes the connection meanwhile (`device` names it).
+pub async fn answer_pings_until(
+    socket: &mut Socket,
+    at: tokio::time::Instant,
+    clock_ns: impl Fn() -> i64,
+    device: &str,
+) -> Result<()> {
+    loop {
+        tokio::select! {
+            _ = tokio::time::sleep_until(at) => return Ok(()),
+            message = socket.next() => match message {
+                Some(Ok(Message::Text(text))) => {
+                    if let Ok(RelayMessage::Ping { relay_ns }) = serde_json::from_str(&text) {
+                        socket.send(json(&ClientMessage::Pong { relay_ns, device_ns: clock_ns() })).await?;
+                    }
+                }
+                Some(Ok(Message::Close(frame))) => bail!("device `{device}`: {}", describe_close(frame.as_ref())),
+                Some(Ok(_)) => {}
+                Some(Err(e)) => bail!("device `{device}`: {e}"),
+                None => bail!("device `{device}`: the relay closed the connection"),
+            },
         }
     }
 }

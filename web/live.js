@@ -28,6 +28,7 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
     kept: null,
     closed: null,
     lastFrame: null,
+    scene: null, // the drawn frame's SceneData JSON bytes
   };
   state.live = live;
 
@@ -164,14 +165,8 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
       return;
     }
     const info = event.frame;
-    // The drawn joints (24 × 3, metres), for the curious and the tests.
-    try {
-      const scene = JSON.parse(new TextDecoder().decode(event.scene));
-      live.lastJoints = scene.joints;
-      live.lastScene = scene;
-    } catch {
-      live.lastJoints = null;
-    }
+    // The drawn frame's scene (SceneData JSON bytes), for the curious and the tests.
+    live.scene = event.scene;
     live.frames += 1;
     live.lastFrame = info;
     if (info.compute_ms !== null) {

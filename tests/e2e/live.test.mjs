@@ -56,7 +56,8 @@ const live = (app) => app.page.evaluate(() => {
     dropped: l.dropped,
     latencies: l.latencies.length,
     lastFrame: l.lastFrame,
-    root: window.egoexo.live.lastJoints?.slice(0, 3) ?? null,
+    // The drawn root joint (metres).
+    root: l.scene ? JSON.parse(new TextDecoder().decode(l.scene)).joints.slice(0, 3) : null,
   };
 });
 

@@ -6,44 +6,26 @@
 //! frame.
 #![cfg(not(target_arch = "wasm32"))]
 
-use std::io::{BufRead, BufReader};
+mod common;
+
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 
 use egoexo_session::model::Trajectory;
 use egoexo_test_support::workspace_root;
 use serde_json::Value;
 
-/// A running `egoexo serve`; killed when dropped.
-struct Served {
-    child: Child,
+/// `egoexo serve` with its page and store in folders that live as long as it.
+struct LiveServer {
+    served: common::Served,
     url: String,
     _dirs: (tempfile::TempDir, tempfile::TempDir),
 }
 
-impl Drop for Served {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn serve() -> Served {
-    let dist = tempfile::tempdir().unwrap();
-    std::fs::write(dist.path().join("index.html"), "<!doctype html><title>egoexo</title>").unwrap();
-    let store = tempfile::tempdir().unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_egoexo"))
-        .args(["serve", "--listen", "127.0.0.1:0", "--dist"])
-        .arg(dist.path())
-        .arg("--store")
-        .arg(store.path())
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("egoexo serve starts");
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
-    let url = line.trim().strip_prefix("listening on ").unwrap_or_else(|| panic!("unexpected first line {line:?}"));
-    Served { url: url.trim_end_matches('/').to_string(), child, _dirs: (dist, store) }
+fn serve() -> LiveServer {
+    let (dist, store) = (common::dist(), tempfile::tempdir().unwrap());
+    let served = common::serve(dist.path(), &store.path().display().to_string(), &[], &[]);
+    LiveServer { url: served.url.clone(), served, _dirs: (dist, store) }
 }
 
 fn egoexo(args: &[&str]) -> Command {
@@ -150,7 +132,7 @@ fn a_short_load_accounts_for_every_frame() {
         "--url",
         &served.url,
         "--relay-pid",
-        &served.child.id().to_string(),
+        &served.served.child.id().to_string(),
         "--rooms",
         "2",
         "--devices-per-room",

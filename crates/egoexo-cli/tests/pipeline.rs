@@ -103,20 +103,15 @@ fn simulate_inspect_reconstruct_and_evaluate() {
         table.contains("rest-pose") && table.contains("nearest-neighbour") && table.contains("occluded frames"),
         "{table}"
     );
-    let json = ok(&[
-        "eval",
-        "--lib",
-        &s(&lib),
-        "--subjects",
-        "9",
-        "--observers",
-        "1",
-        "--tracking",
-        "1",
-        "--models",
-        &fixture_models(),
-        "--json",
-    ]);
+    // 1-point, one observer, the fixture networks; `extra` chooses the table.
+    let (lib_path, models) = (s(&lib), fixture_models());
+    let eval_networks = |extra: &[&str]| {
+        let mut args = vec!["eval", "--lib", &lib_path, "--subjects", "9", "--observers", "1", "--tracking", "1"];
+        args.extend(["--models", &models, "--json"]);
+        args.extend(extra);
+        ok(&args)
+    };
+    let json = eval_networks(&[]);
     let report: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert_eq!(report["tracking"], 1);
     let methods: Vec<_> =
@@ -132,23 +127,7 @@ fn simulate_inspect_reconstruct_and_evaluate() {
     assert_eq!(paired[0]["baseline"], "ego-only");
 
     // The live table: each lookahead against the offline result on the same frames.
-    let json = ok(&[
-        "eval",
-        "--lib",
-        &s(&lib),
-        "--subjects",
-        "9",
-        "--observers",
-        "1",
-        "--tracking",
-        "1",
-        "--models",
-        &fixture_models(),
-        "--live",
-        "--lookaheads",
-        "0,8",
-        "--json",
-    ]);
+    let json = eval_networks(&["--live", "--lookaheads", "0,8"]);
     let live: serde_json::Value = serde_json::from_str(&json).unwrap();
     let rows = live["rows"].as_array().unwrap();
     let cells: Vec<_> =

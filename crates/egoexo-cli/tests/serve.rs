@@ -5,47 +5,21 @@
 //! completed share byte-exact and no partial one.
 #![cfg(not(target_arch = "wasm32"))]
 
-use std::io::{BufRead, BufReader, Read};
+mod common;
+
+use std::io::Read;
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use common::{Served, dist, egoexo};
 use egoexo_protocol::share::{CreatedShare, ShareId};
 use egoexo_test_support::{python, workspace_root};
 
-/// A running `egoexo serve`; killed when dropped.
-struct Served {
-    child: Child,
-    url: String,
-}
-
-impl Drop for Served {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn dist() -> tempfile::TempDir {
-    let dir = tempfile::tempdir().unwrap();
-    std::fs::write(dir.path().join("index.html"), "<!doctype html><title>egoexo</title>").unwrap();
-    dir
-}
-
-/// Starts `egoexo serve` on a free port with `store`, and waits for its address line.
+/// `egoexo serve` with uploads limited only by the tests' own pace.
 fn serve(dist: &Path, store: &str, envs: &[(&str, String)]) -> Served {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_egoexo"))
-        .args(["serve", "--listen", "127.0.0.1:0", "--uploads-per-minute", "1000", "--store", store, "--dist"])
-        .arg(dist)
-        .envs(envs.iter().map(|(k, v)| (*k, v.as_str())))
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("egoexo serve starts");
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
-    let url = line.trim().strip_prefix("listening on ").unwrap_or_else(|| panic!("unexpected first line {line:?}"));
-    Served { url: url.trim_end_matches('/').to_string(), child }
+    common::serve(dist, store, &["--uploads-per-minute", "1000"], envs)
 }
 
 fn agent() -> ureq::Agent {
@@ -70,10 +44,6 @@ fn download(url: &str, id: &ShareId) -> (u16, Vec<u8>) {
 
 fn random(len: usize, seed: u64) -> Vec<u8> {
     egoexo_test_support::pseudo_random_bytes(len, seed)
-}
-
-fn egoexo(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_egoexo")).args(args).output().expect("egoexo runs")
 }
 
 #[test]

@@ -168,6 +168,37 @@ pub struct Reconstruction {
     pub gates: Vec<ObserverGates>,
 }
 
+impl Reconstruction {
+    /// The reconstruction of frames `range` only (clamped), e.g. the one frame a live view
+    /// shows out of its window; the motion's `start_ns` moves with its first frame.
+    pub fn frames_slice(&self, range: std::ops::Range<usize>) -> Reconstruction {
+        let start = range.start.min(self.joints.len());
+        let end = range.end.clamp(start, self.joints.len());
+        let slice = |len: usize| start.min(len)..end.min(len);
+        let offset_ns = (start as f64 * 1e9 / f64::from(self.motion.fps)).round() as i64;
+        Reconstruction {
+            method: self.method,
+            tracking: self.tracking,
+            motion: SmplMotion {
+                start_ns: self.motion.start_ns.saturating_add(offset_ns),
+                poses: self.motion.poses[slice(self.motion.poses.len())].to_vec(),
+                ..self.motion.clone()
+            },
+            joints: self.joints[start..end].to_vec(),
+            valid: self.valid[slice(self.valid.len())].to_vec(),
+            exo_evidence: self.exo_evidence[slice(self.exo_evidence.len())].to_vec(),
+            gates: self
+                .gates
+                .iter()
+                .map(|g| ObserverGates {
+                    observer_id: g.observer_id.clone(),
+                    gates: g.gates[slice(g.gates.len())].to_vec(),
+                })
+                .collect(),
+        }
+    }
+}
+
 /// The engine: the trained networks (per tracking mode) and the baselines' data.
 #[derive(Clone, Debug, Default)]
 pub struct Engine {

@@ -242,6 +242,21 @@ fn viewer_hello(room: &RoomCreated) -> ClientMessage {
     }
 }
 
+/// A wearer with only a head stream, joined with the device secret and welcomed.
+async fn head_wearer(addr: SocketAddr, room: &RoomCreated) -> Client {
+    let hello = device_hello(device_join(room), "wearer", DeviceRole::Wearer, &[Stream::Head]);
+    let mut wearer = Client::connect(addr, hello, 0, true).await;
+    wearer.welcome().await;
+    wearer
+}
+
+/// A viewer joined with the watch secret and welcomed.
+async fn welcomed_viewer(addr: SocketAddr, room: &RoomCreated) -> Client {
+    let mut viewer = Client::connect(addr, viewer_hello(room), 0, true).await;
+    viewer.welcome().await;
+    viewer
+}
+
 fn device_join(room: &RoomCreated) -> Join {
     Join::Secret { room: room.room.clone(), secret: room.device_secret.clone() }
 }
@@ -333,8 +348,7 @@ async fn devices_stream_to_viewers_on_the_relay_clock() {
     .await;
     observer.welcome().await;
     observer.send(json(&ClientMessage::Calibration { camera: camera() }));
-    let mut viewer = Client::connect(relay.addr, viewer_hello(&room), 0, true).await;
-    viewer.welcome().await;
+    let mut viewer = welcomed_viewer(relay.addr, &room).await;
     // 60 head poses at 60 Hz, wrists at 30 Hz, keypoints at 30 Hz.
     let (w, o) = (&wearer, &observer);
     tokio::join!(stream_poses(w, Stream::Head, 60, 60.0, 0), stream_poses(w, Stream::LeftWrist, 30, 30.0, 0), async {
@@ -387,14 +401,7 @@ async fn devices_stream_to_viewers_on_the_relay_clock() {
 async fn a_viewer_joining_late_gets_the_last_seconds_at_once() {
     let relay = relay(LiveLimits { history: Duration::from_millis(600), ..test_limits() }).await;
     let room = create_room(relay.addr).await;
-    let mut wearer = Client::connect(
-        relay.addr,
-        device_hello(device_join(&room), "wearer", DeviceRole::Wearer, &[Stream::Head]),
-        0,
-        true,
-    )
-    .await;
-    wearer.welcome().await;
+    let wearer = head_wearer(relay.addr, &room).await;
     // 1.5 s of head poses at 50 Hz; the room keeps the last 0.6 s.
     stream_poses(&wearer, Stream::Head, 75, 50.0, 0).await;
     let mut viewer = Client::connect(relay.addr, viewer_hello(&room), 0, true).await;
@@ -413,16 +420,8 @@ async fn a_viewer_joining_late_gets_the_last_seconds_at_once() {
 async fn hostile_clients_are_closed_with_a_reason_and_the_others_carry_on() {
     let relay = relay(LiveLimits { join_attempts_per_minute: 5, ..test_limits() }).await;
     let room = create_room(relay.addr).await;
-    let mut wearer = Client::connect(
-        relay.addr,
-        device_hello(device_join(&room), "wearer", DeviceRole::Wearer, &[Stream::Head]),
-        0,
-        true,
-    )
-    .await;
-    wearer.welcome().await;
-    let mut viewer = Client::connect(relay.addr, viewer_hello(&room), 0, true).await;
-    viewer.welcome().await;
+    let wearer = head_wearer(relay.addr, &room).await;
+    let mut viewer = welcomed_viewer(relay.addr, &room).await;
 
     let code = |kind: CloseKind| kind.code();
     // A watch link cannot publish.
@@ -518,16 +517,8 @@ async fn hostile_clients_are_closed_with_a_reason_and_the_others_carry_on() {
 async fn a_clock_jump_is_caught_before_frames_are_misplaced() {
     let relay = relay(test_limits()).await;
     let room = create_room(relay.addr).await;
-    let mut wearer = Client::connect(
-        relay.addr,
-        device_hello(device_join(&room), "wearer", DeviceRole::Wearer, &[Stream::Head]),
-        0,
-        true,
-    )
-    .await;
-    wearer.welcome().await;
-    let mut viewer = Client::connect(relay.addr, viewer_hello(&room), 0, true).await;
-    viewer.welcome().await;
+    let wearer = head_wearer(relay.addr, &room).await;
+    let mut viewer = welcomed_viewer(relay.addr, &room).await;
     stream_poses(&wearer, Stream::Head, 20, 50.0, 0).await;
     // The device's clock is set 30 s forward, then 45 s back.
     wearer.clock_offset_ns.store(30_000 * MS, std::sync::atomic::Ordering::SeqCst);
@@ -618,8 +609,7 @@ async fn a_device_that_reconnects_keeps_its_channels_and_the_old_socket_is_close
         device_hello(device_join(&room), "observer-1", DeviceRole::Observer, &[Stream::Head, Stream::Keypoints]);
     let mut first = Client::connect(relay.addr, hello.clone(), 0, true).await;
     first.welcome().await;
-    let mut viewer = Client::connect(relay.addr, viewer_hello(&room), 0, true).await;
-    viewer.welcome().await;
+    let mut viewer = welcomed_viewer(relay.addr, &room).await;
     // Once the relay knows the first connection's clock (its frames would otherwise wait).
     tokio::time::sleep(Duration::from_millis(300)).await;
     first.send_frame(Stream::Head, pose(0.1));
@@ -641,8 +631,7 @@ async fn a_device_that_reconnects_keeps_its_channels_and_the_old_socket_is_close
 async fn rooms_expire_and_their_clients_are_told() {
     let relay = relay(LiveLimits { room_ttl: Duration::from_millis(800), ..test_limits() }).await;
     let room = create_room(relay.addr).await;
-    let mut viewer = Client::connect(relay.addr, viewer_hello(&room), 0, true).await;
-    viewer.welcome().await;
+    let mut viewer = welcomed_viewer(relay.addr, &room).await;
     let (c, reason) = viewer.closed().await;
     assert_eq!((c, reason.as_str()), (CloseKind::RoomClosed.code(), "the room expired"));
     assert_eq!(relay.live.room_count(), 0);

@@ -135,15 +135,17 @@ impl LiveTake {
         Some((*head.keys().next()?, *head.keys().next_back()?))
     }
 
-    /// Frames received per device and stream, for the page's device list.
-    pub fn frame_counts(&self) -> Vec<(String, Stream, usize)> {
-        let mut out = Vec::new();
+    /// Frames kept per device and stream (wire names: `wearer` → `head` → 1234).
+    pub fn frame_counts(&self) -> BTreeMap<String, BTreeMap<String, u64>> {
+        let mut out: BTreeMap<String, BTreeMap<String, u64>> = BTreeMap::new();
         for (id, device) in &self.devices {
-            out.extend(device.poses.iter().map(|(s, p)| (id.clone(), *s, p.len())));
+            let counts = out.entry(id.clone()).or_default();
+            counts.extend(device.poses.iter().map(|(s, p)| (s.name().to_string(), p.len() as u64)));
             if !device.keypoints.is_empty() {
-                out.push((id.clone(), Stream::Keypoints, device.keypoints.len()));
+                counts.insert(Stream::Keypoints.name().to_string(), device.keypoints.len() as u64);
             }
         }
+        out.retain(|_, counts| !counts.is_empty());
         out
     }
 
@@ -291,6 +293,9 @@ mod tests {
         let (window, _) = take.to_session("window", Some(500 * MS..=800 * MS)).unwrap();
         assert!(window.wearer.head.timestamps_ns.iter().all(|t| (500 * MS..=800 * MS).contains(t)));
         assert_eq!(take.head_range_ns(), Some((0, 89 * 11 * MS)));
+        let counts = take.frame_counts();
+        assert_eq!(counts["wearer"], BTreeMap::from([("head".into(), 90), ("left-wrist".into(), 30)]));
+        assert_eq!(counts["observer-1"], BTreeMap::from([("head".into(), 30), ("keypoints".into(), 30)]));
     }
 
     #[test]

@@ -16,7 +16,7 @@ use std::ops::Range;
 
 use egoexo_core::aligned::Timeline;
 use egoexo_infer::windows::WINDOW;
-use egoexo_infer::{Engine, InferError, Method, ObserverGates, ReconstructOptions, Reconstruction};
+use egoexo_infer::{Engine, InferError, Method, ReconstructOptions};
 use egoexo_protocol::live::{DataFrame, RelayMessage};
 use egoexo_protocol::worker::{LiveFrameInfo, LiveTakeSummary};
 use egoexo_session::align::{AlignError, AlignOptions, align_on_timeline};
@@ -177,18 +177,7 @@ impl LiveReconstructor {
         // The scene of the one frame shown (its rays only), on the window's floor (the lowest
         // foot over the window: steady while the feet lift).
         let one = index..index + 1;
-        let frame_recon = Reconstruction {
-            joints: recon.joints[one.clone()].to_vec(),
-            valid: recon.valid[one.clone()].to_vec(),
-            exo_evidence: recon.exo_evidence[one.clone()].to_vec(),
-            gates: recon
-                .gates
-                .iter()
-                .map(|g| ObserverGates { observer_id: g.observer_id.clone(), gates: g.gates[one.clone()].to_vec() })
-                .collect(),
-            ..recon.clone()
-        };
-        let mut scene = crate::scene::build_scene(&aligned.frames_slice(one), &frame_recon, None);
+        let mut scene = crate::scene::build_scene(&aligned.frames_slice(one.clone()), &recon.frames_slice(one), None);
         scene.floor_y = crate::scene::floor_y(&recon.joints, &recon.valid);
         scene.check().map_err(LiveError::Scene)?;
         let exo_observers = recon
@@ -213,13 +202,13 @@ impl LiveReconstructor {
 
 /// What `take` holds, for the page (`shown` / `skipped`: live frames so far).
 pub fn take_summary(take: &LiveTake, shown: u64, skipped: u64) -> LiveTakeSummary {
-    let mut summary = LiveTakeSummary { frames: take.stats().frames, shown, skipped, ..LiveTakeSummary::default() };
-    for (device, stream, count) in take.frame_counts() {
-        let name = serde_json::to_value(stream).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default();
-        summary.streams.entry(device).or_default().insert(name, count as u64);
+    LiveTakeSummary {
+        frames: take.stats().frames,
+        streams: take.frame_counts(),
+        head_span_s: take.head_range_ns().map_or(0.0, |(a, b)| (b - a) as f64 / 1e9),
+        shown,
+        skipped,
     }
-    summary.head_span_s = take.head_range_ns().map_or(0.0, |(a, b)| (b - a) as f64 / 1e9);
-    summary
 }
 
 impl LiveFrame {

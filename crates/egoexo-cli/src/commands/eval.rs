@@ -66,11 +66,12 @@ pub fn run(args: Args) -> Result<()> {
         ProgressStyle::with_template("eval {bar:40} {pos}/{len} clips [{elapsed_precise}]")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
+    let mut progress = |done: usize, total: usize| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    };
     if args.live {
-        let report = evaluate_live(&library, &engine, &options, &args.lookaheads, &mut |done, total| {
-            bar.set_length(total as u64);
-            bar.set_position(done as u64);
-        })?;
+        let report = evaluate_live(&library, &engine, &options, &args.lookaheads, &mut progress)?;
         bar.finish_and_clear();
         if args.json {
             println!("{}", serde_json::to_string(&report)?);
@@ -79,10 +80,7 @@ pub fn run(args: Args) -> Result<()> {
         }
         return Ok(());
     }
-    let report = evaluate(&library, &engine, &options, &mut |done, total| {
-        bar.set_length(total as u64);
-        bar.set_position(done as u64);
-    })?;
+    let report = evaluate(&library, &engine, &options, &mut progress)?;
     bar.finish_and_clear();
     if args.json {
         println!("{}", serde_json::to_string(&report)?);

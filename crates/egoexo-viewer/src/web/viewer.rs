@@ -248,6 +248,22 @@ impl State {
         self.target.config.width as f32 / self.target.config.height.max(1) as f32
     }
 
+    /// Shows `scene` from frame 0 at the current playback speed; `frame_camera` points the
+    /// camera at it (otherwise the camera stays where the user put it).
+    fn show_scene(&mut self, scene: SceneData, frame_camera: bool) -> Result<(), ViewerError> {
+        let speed = self.playback.speed();
+        self.playback = Playback::new(scene.frames, f64::from(scene.fps));
+        self.playback.set_speed(speed)?;
+        self.target.renderer.set_static_lines(&static_lines(&scene));
+        self.scene = Some(scene);
+        self.scene_generation += 1;
+        self.dirty = true;
+        if frame_camera {
+            self.reset_camera();
+        }
+        Ok(())
+    }
+
     fn reset_camera(&mut self) {
         let aspect = self.aspect();
         let frame = self.playback.frame();
@@ -693,16 +709,7 @@ impl Viewer {
     /// current speed; the camera frames the wearer's session and the observers at frame 0.
     pub fn set_scene_json(&self, bytes: &[u8]) -> Result<(), JsError> {
         let scene = parse_scene(bytes).map_err(|e| js_error(e.into()))?;
-        self.update(|s| {
-            let speed = s.playback.speed();
-            s.playback = Playback::new(scene.frames, f64::from(scene.fps));
-            s.playback.set_speed(speed)?;
-            s.target.renderer.set_static_lines(&static_lines(&scene));
-            s.scene = Some(scene);
-            s.scene_generation += 1;
-            s.reset_camera();
-            Ok(())
-        })
+        self.update(|s| s.show_scene(scene, true))
     }
 
     /// Shows one live frame: `bytes` are `serde_json` of a one-frame `SceneData`. Unlike
@@ -713,15 +720,7 @@ impl Viewer {
         let scene = parse_scene(bytes).map_err(|e| js_error(e.into()))?;
         self.update(|s| {
             let first = s.scene.as_ref().is_none_or(|old| old.frames != 1 || old.name != scene.name);
-            s.playback = Playback::new(scene.frames, f64::from(scene.fps));
-            s.target.renderer.set_static_lines(&static_lines(&scene));
-            s.scene = Some(scene);
-            s.scene_generation += 1;
-            if first {
-                s.reset_camera();
-            }
-            s.dirty = true;
-            Ok(())
+            s.show_scene(scene, first)
         })
     }
 

@@ -190,22 +190,7 @@ async fn run_device(device: LoadDevice) -> Result<()> {
     let period = Duration::from_secs_f64(1.0 / hz);
     let mut next = start;
     while next < end {
-        loop {
-            tokio::select! {
-                _ = tokio::time::sleep_until(next) => break,
-                message = socket.next() => match message {
-                    Some(Ok(Message::Text(text))) => {
-                        if let Ok(RelayMessage::Ping { relay_ns }) = serde_json::from_str(&text) {
-                            socket.send(client::json(&ClientMessage::Pong { relay_ns, device_ns: client::system_ns() })).await?;
-                        }
-                    }
-                    Some(Ok(Message::Close(frame))) => bail!("device {}: {}", hello.id, client::describe_close(frame.as_ref())),
-                    Some(Ok(_)) => {}
-                    Some(Err(e)) => bail!("device {}: {e}", hello.id),
-                    None => bail!("device {}: the relay closed the connection", hello.id),
-                },
-            }
-        }
+        client::answer_pings_until(&mut socket, next, client::system_ns, &hello.id).await?;
         let t_s = next.duration_since(start).as_secs_f64();
         let frame = DataFrame {
             channel: Stream::Head.channel(),

@@ -46,7 +46,7 @@ pub struct Args {
 pub struct RecordReport {
     pub out: String,
     /// Frames kept per device and stream.
-    pub frames: BTreeMap<String, BTreeMap<String, usize>>,
+    pub frames: BTreeMap<String, BTreeMap<String, u64>>,
     pub total_frames: u64,
     pub lost_tracking: u64,
     pub duplicates: u64,
@@ -69,15 +69,11 @@ pub fn run(args: Args) -> Result<()> {
     let (session, warnings) = take.to_session(&name, None).context("the take cannot be kept")?;
     egoexo_session::format::save_egoexo(&session, &args.out, args.folder)
         .with_context(|| format!("writing {}", args.out.display()))?;
-    let mut frames: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
-    for (device, stream, count) in take.frame_counts() {
-        frames.entry(device).or_default().insert(super::replay::stream_name(stream), count);
-    }
     let stats = take.stats();
     let head_span_s = take.head_range_ns().map(|(a, b)| (b - a) as f64 / 1e9).unwrap_or(0.0);
     let report = RecordReport {
         out: args.out.display().to_string(),
-        frames,
+        frames: take.frame_counts(),
         total_frames: stats.frames,
         lost_tracking: stats.lost_tracking,
         duplicates: stats.duplicates,

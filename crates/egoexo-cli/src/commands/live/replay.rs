@@ -11,12 +11,11 @@ use std::time::Duration;
 use anyhow::{Context, Result, bail};
 use egoexo_core::camera::CameraCalibration;
 use egoexo_protocol::live::{
-    ClientMessage, DataFrame, DeviceHello, DeviceRole, FramePayload, Join, LIVE_PROTOCOL_VERSION, LiveLink,
-    RelayMessage, Stream,
+    ClientMessage, DataFrame, DeviceHello, DeviceRole, FramePayload, Join, LIVE_PROTOCOL_VERSION, LiveLink, Stream,
 };
 use egoexo_session::align::resample_trajectory;
 use egoexo_session::model::{Session, Trajectory};
-use futures::{SinkExt, StreamExt};
+use futures::SinkExt;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
@@ -265,10 +264,6 @@ pub struct ReplayReport {
     pub session_span_s: f64,
 }
 
-pub(super) fn stream_name(stream: Stream) -> String {
-    serde_json::to_value(stream).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default()
-}
-
 struct DeviceRun {
     server: ServerAddress,
     join: Join,
@@ -328,7 +323,7 @@ impl DeviceRun {
     async fn run(mut self, stop: tokio::sync::watch::Receiver<bool>) -> Result<DeviceReport> {
         let mut report = DeviceReport {
             id: self.plan.hello.id.clone(),
-            role: format!("{:?}", self.plan.hello.role).to_lowercase(),
+            role: self.plan.hello.role.name().to_string(),
             clock_offset_ns: self.clock.origin_ns - client::system_ns(),
             drift_ppm: self.clock.drift * 1e6,
             planned: self.plan.samples.len() as u64,
@@ -357,32 +352,15 @@ impl DeviceRun {
             let jitter = self.jitter.mul_f64(self.rng.random::<f64>());
             let send_at = (capture + jitter).max(last_send);
             // Answer pings while waiting to send.
-            loop {
-                tokio::select! {
-                    _ = tokio::time::sleep_until(send_at) => break,
-                    message = socket.next() => match message {
-                        Some(Ok(Message::Text(text))) => {
-                            if let Ok(RelayMessage::Ping { relay_ns }) = serde_json::from_str(&text) {
-                                let pong = ClientMessage::Pong { relay_ns, device_ns: self.clock.now() };
-                                socket.send(client::json(&pong)).await?;
-                            }
-                        }
-                        Some(Ok(Message::Close(frame))) => {
-                            bail!("device `{}`: {}", self.plan.hello.id, client::describe_close(frame.as_ref()))
-                        }
-                        Some(Ok(_)) => {}
-                        Some(Err(e)) => bail!("device `{}`: {e}", self.plan.hello.id),
-                        None => bail!("device `{}`: the relay closed the connection", self.plan.hello.id),
-                    },
-                }
-            }
+            let clock = &self.clock;
+            client::answer_pings_until(&mut socket, send_at, || clock.now(), &self.plan.hello.id).await?;
             let frame = DataFrame {
                 channel: sample.stream.channel(),
                 timestamp_ns: self.clock.at(capture),
                 payload: sample.payload,
             };
             socket.send(Message::Binary(Bytes::from(frame.encode()))).await.context("sending a frame")?;
-            *report.sent.entry(stream_name(sample.stream)).or_default() += 1;
+            *report.sent.entry(sample.stream.name().to_string()).or_default() += 1;
             last_send = send_at;
             n += 1;
         }

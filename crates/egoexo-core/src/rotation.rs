@@ -43,8 +43,8 @@ impl Rot6d {
         (Vec3::new(a[0], a[1], a[2]), Vec3::new(a[3], a[4], a[5]))
     }
 
-    /// Decodes by Gram–Schmidt: `b1 = a1/|a1|`, `b2 = normalize(a2 − (b1·a2) b1)`,
-    /// `b3 = b1 × b2`.
+    /// Decodes by Gram–Schmidt: `b1 = a1/|a1|`, `b2 = normalize(a2 − (b1·a2) b1)` (projected
+    /// twice for f32 accuracy), `b3 = b1 × b2`.
     ///
     /// Degenerate input never yields NaN: a zero or non-finite first column falls back to
     /// +X, and a second column parallel to the first falls back to a fixed perpendicular
@@ -55,7 +55,11 @@ impl Rot6d {
         let a2 = if a2.is_finite() { a2 } else { Vec3::ZERO };
         let ortho = a2 - b1.dot(a2) * b1;
         let b2 = if ortho.length() > DEGENERATE_EPS * a2.length().max(1.0) {
-            ortho.normalize()
+            // A second pass ("twice is enough"): when `a2` is nearly parallel to `a1` the
+            // subtraction above cancels and leaves `b1·b2` at ~1e-5 in f32; projecting once
+            // more brings it to rounding level, so decoding an output again changes nothing.
+            let b2 = ortho.normalize();
+            (b2 - b1.dot(b2) * b1).normalize()
         } else {
             b1.any_orthonormal_vector()
         };

@@ -15,6 +15,17 @@ use egoexo_core::rotation::{
 };
 use proptest::prelude::*;
 
+/// Columns 172° apart: one Gram–Schmidt pass cancels and leaves the decoded columns 2e-5
+/// from orthogonal, so decoding the output again moved it (a CI proptest case, kept here
+/// because proptest does not read regression files next to integration tests).
+#[test]
+fn gram_schmidt_of_nearly_opposite_columns_is_orthonormal_and_idempotent() {
+    let m = Rot6d([8.536994, -1.7020134, -8.678864, -7.6027865, 1.5620908, 7.6577654]).to_mat3();
+    assert!(m.x_axis.dot(m.y_axis).abs() < 1e-6, "b1·b2 = {}", m.x_axis.dot(m.y_axis));
+    assert!((m.transpose() * m).abs_diff_eq(Mat3::IDENTITY, 1e-6));
+    assert!(Rot6d::from_mat3(m).to_mat3().abs_diff_eq(m, 1e-6));
+}
+
 proptest! {
     #[test]
     fn six_d_matrix_round_trip(q in any_rotation()) {

@@ -175,10 +175,12 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
     }
     live.modes.add(info.method);
     const who = info.exo_observers.length > 0 ? ` (rays from ${info.exo_observers.join(', ')})` : '';
-    $('live-mode').textContent = !info.tracked ? 'the wearer is not tracked'
+    const networks = info.trained_for_lookahead ? ` · networks trained for lookahead ${info.lookahead}` : '';
+    $('live-mode').textContent = (!info.tracked ? 'the wearer is not tracked'
       : info.method === 'ego-only' ? 'ego-only: no observer sees the wearer now (none connected, or no keypoints)'
-        : `ego-exo${who}`;
+        : `ego-exo${who}`) + networks;
     $('live-mode').dataset.method = info.method;
+    $('live-mode').dataset.trainedForLookahead = String(info.trained_for_lookahead);
     // Latency: when the frame reached the page, and when it is on screen (the viewer draws in
     // this animation frame).
     if (live.offsetMs !== null) {
@@ -239,7 +241,8 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
     }
   }
 
-  // The lookahead choices with the eval's figures beside each (ego-exo, 1 observer), and the
+  // The lookahead choices with the eval's figures beside each (ego-exo, 1 observer; from the
+  // live networks trained for that lookahead where they ship, else the offline ones), and the
   // default the eval picked: the smallest within 10 % of the offline MPJPE.
   async function fillLookaheads() {
     const select = $('live-lookahead');
@@ -255,7 +258,8 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
       option.value = String(l);
       const per = Object.entries(figures?.tracking ?? {}).flatMap(([mode, methods]) => {
         const row = methods['ego-exo']?.[String(l)];
-        return row ? [`${mode} ${row.mpjpe_cm.toFixed(1)} cm (${row.ratio.toFixed(2)}× offline)`] : [];
+        const trained = row?.networks === 'live' ? ', live networks' : '';
+        return row ? [`${mode} ${row.mpjpe_cm.toFixed(1)} cm (${row.ratio.toFixed(2)}× offline${trained})`] : [];
       });
       option.textContent = `${l} frames (≥ ${Math.round((l * 1000) / 30)} ms)${per.length ? ` — MPJPE ${per.join(', ')}` : ''}`;
       return option;

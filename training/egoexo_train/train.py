@@ -17,6 +17,12 @@ small simulated dataset needs, both documented in the model card:
 The fusion graph can low-pass its exo input over time (`--exo-smoothing`, `--exo-fade`) and
 its output (`--output-smoothing`); see `model.py`.
 
+Live variants (`--readout-lookahead L`): live reconstruction reads each window out at frame
+`T - 1 - L`, L frames before its newest frame (the offline models are read out near the centre,
+with 48 frames of context on each side). Such a model is trained with the same losses over the
+whole window plus, weighted by `--readout-weight`, the same losses (velocity included) on the
+read-out frame and the frame before it, so the network learns to use one-sided context there.
+
 Example (the exact commands are in training/README.md):
     python -m egoexo_train.train --stage ego --shards data/ego3 --val data/val-ego3 --out runs/ego3 --steps 3000
 """
@@ -134,6 +140,14 @@ def pose_losses(pred_root, pred_body, target, true_pos, rest, mask) -> PoseLosse
     return PoseLosses(root, body, position, mpjpe, velocity, acceleration)
 
 
+def readout_frames(window: int, lookahead: int) -> torch.Tensor:
+    """``[window]``: 1 at the frame live use reads out with `lookahead` (``window - 1 - lookahead``)
+    and at the frame before it (so the read-out losses include its velocity), 0 elsewhere."""
+    mask = torch.zeros(window)
+    mask[window - 2 - lookahead:window - lookahead] = 1.0
+    return mask
+
+
 def fusion_inputs(batch, gate_net, train: bool, generator: torch.Generator,
                   gate_dropout: float = GATE_DROPOUT):
     """Gate, observer dropout and gate dropout (the gate replaced by the validity mask for a
@@ -215,7 +229,14 @@ def main():
                              f"{ACCURATE_RAY_M} m of the true keypoint'")
     parser.add_argument("--gate-dropout", type=float, default=GATE_DROPOUT,
                         help="stage 2: fraction of training windows whose gate is replaced by the validity mask")
+    parser.add_argument("--readout-lookahead", type=int, default=None, metavar="L",
+                        help="stage 2, live variants: add the losses on the read-out frame T-1-L (and the frame "
+                             "before it, for the velocity)")
+    parser.add_argument("--readout-weight", type=float, default=1.0,
+                        help="weight of the read-out losses relative to the whole-window losses")
     args = parser.parse_args()
+    if args.readout_lookahead is not None and args.stage != "fusion":
+        parser.error("--readout-lookahead trains live fusion variants (--stage fusion)")
 
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
@@ -256,36 +277,54 @@ def main():
         exo, mask, gate = fusion_inputs(batch, modules["gate"], train, generator, args.gate_dropout)
         return modules["fusion"](batch["ego"], batch["egonet"], exo, mask), gate
 
+    readout = None
+    if args.readout_lookahead is not None:
+        if not 0 <= args.readout_lookahead < window - 1:
+            parser.error(f"--readout-lookahead must be in 0..{window - 2}")
+        readout = readout_frames(window, args.readout_lookahead)
+
+    def losses(root, body, batch, mask):
+        ls = pose_losses(root, body, batch["target"], batch["target_positions"], batch["rest_joints"], mask)
+        return ls, ROOT_WEIGHT * ls.root + BODY_WEIGHT * ls.body + POSITION_WEIGHT * ls.position
+
     def evaluate():
+        """Validation loss, root L1, body L1 and MPJPE over whole windows, and the MPJPE of the
+        read-out frames (NaN without `--readout-lookahead`)."""
         for m in modules.values():
             m.eval()
-        totals = np.zeros(5)
+        totals, readout_totals = np.zeros(5), np.zeros(2)
         with torch.no_grad():
             n_val = val_data["ego"].shape[0]
             for i in range(0, n_val, 64):
                 batch = take(val_data, slice(i, i + 64), keys + BATCH_KEYS_EXTRA)
                 (root, body), _ = forward(batch, False)
-                ls = pose_losses(root, body, batch["target"], batch["target_positions"], batch["rest_joints"], batch["frame_mask"])
-                loss = ROOT_WEIGHT * ls.root + BODY_WEIGHT * ls.body + POSITION_WEIGHT * ls.position
+                ls, loss = losses(root, body, batch, batch["frame_mask"])
                 w = batch["frame_mask"].sum().item()
                 totals += np.array([loss.item(), ls.root.item(), ls.body.item(), ls.mpjpe.item(), 1.0]) * w
+                if readout is not None:
+                    mask = batch["frame_mask"] * readout
+                    readout_totals += np.array([losses(root, body, batch, mask)[0].mpjpe.item(), 1.0]) * mask.sum().item()
         for m in modules.values():
             m.train()
-        return totals[:4] / max(totals[4], 1.0)
+        readout_mpjpe = readout_totals[0] / readout_totals[1] if readout_totals[1] > 0 else float("nan")
+        return np.append(totals[:4] / max(totals[4], 1.0), readout_mpjpe)
 
     args.out.mkdir(parents=True, exist_ok=True)
     log = open(args.out / "curve.csv", "w", newline="")
     writer = csv.writer(log)
-    writer.writerow(["step", "seconds", "train_loss", "val_loss", "val_root_l1", "val_body_l1", "val_head_relative_mpjpe_cm", "lr"])
+    writer.writerow(["step", "seconds", "train_loss", "val_loss", "val_root_l1", "val_body_l1", "val_head_relative_mpjpe_cm",
+                     "lr", "val_readout_mpjpe_cm"])
     start = time.time()
     running = []
     stream = batches(n_train, args.batch, generator)
     for step in range(1, args.steps + 1):
         batch = take(train_data, next(stream), keys + BATCH_KEYS_EXTRA)
         (root, body), _ = forward(batch, True)
-        ls = pose_losses(root, body, batch["target"], batch["target_positions"], batch["rest_joints"], batch["frame_mask"])
-        loss = (ROOT_WEIGHT * ls.root + BODY_WEIGHT * ls.body + POSITION_WEIGHT * ls.position
-                + args.velocity_weight * ls.velocity + args.acceleration_weight * ls.acceleration)
+        ls, loss = losses(root, body, batch, batch["frame_mask"])
+        loss = loss + args.velocity_weight * ls.velocity + args.acceleration_weight * ls.acceleration
+        if readout is not None:
+            ls_r, loss_r = losses(root, body, batch, batch["frame_mask"] * readout)
+            loss = loss + args.readout_weight * (loss_r + args.velocity_weight * ls_r.velocity)
         if args.stage == "fusion" and args.gate_aux_weight > 0:
             loss = loss + args.gate_aux_weight * gate_aux_loss(modules["gate"], batch)
         optimizer.zero_grad(set_to_none=True)
@@ -298,10 +337,12 @@ def main():
             val = evaluate()
             elapsed = time.time() - start
             writer.writerow([step, f"{elapsed:.1f}", f"{np.mean(running):.5f}", f"{val[0]:.5f}", f"{val[1]:.5f}",
-                             f"{val[2]:.5f}", f"{100 * val[3]:.2f}", f"{schedule.get_last_lr()[0]:.2e}"])
+                             f"{val[2]:.5f}", f"{100 * val[3]:.2f}", f"{schedule.get_last_lr()[0]:.2e}",
+                             f"{100 * val[4]:.2f}"])
             log.flush()
+            readout_text = f", read-out frame {100 * val[4]:.2f} cm" if readout is not None else ""
             print(f"step {step:5d} {elapsed:7.0f}s train {np.mean(running):.4f} val {val[0]:.4f} "
-                  f"head-relative MPJPE {100 * val[3]:.2f} cm", flush=True)
+                  f"head-relative MPJPE {100 * val[3]:.2f} cm{readout_text}", flush=True)
             running = []
     seconds = time.time() - start
     state = {name: m.state_dict() for name, m in modules.items()}

@@ -5,7 +5,7 @@ frames, and the acceleration term larger than the velocity term for frame-to-fra
 import torch
 
 from egoexo_train.rotations import forward_kinematics
-from egoexo_train.train import HEAD_JOINT, pose_losses
+from egoexo_train.train import HEAD_JOINT, pose_losses, readout_frames
 
 REST = torch.tensor([[0.0, 0.9, 0.0]] + [[0.05 * (j % 3 - 1), 0.9 + 0.03 * j, 0.01 * j] for j in range(1, 24)])
 
@@ -50,3 +50,20 @@ def test_jitter_raises_acceleration_more_than_velocity_and_padding_is_ignored():
     ls = pose_losses(padded[..., :6], padded[..., 6:], target, true_pos, rest, mask)
     for name, value in ls._asdict().items():
         assert value.item() < 1e-6, (name, value.item())
+
+
+def test_readout_frames_are_the_live_read_out_frame_and_the_one_before():
+    assert readout_frames(96, 0).nonzero().flatten().tolist() == [94, 95]
+    assert readout_frames(96, 4).nonzero().flatten().tolist() == [90, 91]
+    # As a loss mask it scores only those frames: an error elsewhere costs nothing.
+    target = smooth_poses(1)
+    rest = REST.expand(1, 24, 3)
+    wrong_early = target.clone()
+    wrong_early[:, :90] += 0.3
+    mask = readout_frames(96, 4)[None]
+    ls = pose_losses(wrong_early[..., :6], wrong_early[..., 6:], target, head_relative(rest, target), rest, mask)
+    assert ls.position.item() < 1e-6 and ls.velocity.item() < 1e-6
+    wrong_late = target.clone()
+    wrong_late[:, 91] += 0.3
+    ls = pose_losses(wrong_late[..., :6], wrong_late[..., 6:], target, head_relative(rest, target), rest, mask)
+    assert ls.position.item() > 1e-3 and ls.velocity.item() > 1e-3

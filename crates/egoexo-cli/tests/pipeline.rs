@@ -138,6 +138,54 @@ fn simulate_inspect_reconstruct_and_evaluate() {
     for row in rows {
         let (ratio, vs) = (row["mpjpe_ratio"].as_f64().unwrap(), row["vs_offline_cm"].as_f64().unwrap());
         assert!(ratio.is_finite() && ratio > 0.0 && vs.is_finite() && vs >= 0.0, "{row}");
+        assert_eq!(row["trained_for_lookahead"], false);
+    }
+
+    // A models folder whose manifest adds a 1-point live variant for lookahead 0 (the fixture's
+    // 1-point files): its rows come beside the offline networks' at 0, none at 8, and, being
+    // the same networks, they read out the same joints.
+    let live_models = dir.join("live-models");
+    for sub in ["1pt", "3pt"] {
+        std::fs::create_dir_all(live_models.join(sub)).unwrap();
+        for file in ["egonet.onnx", "gate.onnx", "fusion.onnx"] {
+            std::fs::copy(Path::new(&models).join(sub).join(file), live_models.join(sub).join(file)).unwrap();
+        }
+    }
+    let mut manifest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(Path::new(&models).join("manifest.json")).unwrap()).unwrap();
+    let sets = manifest["model_sets"].as_array_mut().unwrap();
+    let mut variant = sets.iter().find(|s| s["tracking"] == "one_point").unwrap().clone();
+    variant["lookahead"] = serde_json::Value::from(0);
+    sets.push(variant);
+    std::fs::write(live_models.join("manifest.json"), manifest.to_string()).unwrap();
+    let json = ok(&[
+        "eval",
+        "--lib",
+        &lib_path,
+        "--subjects",
+        "9",
+        "--observers",
+        "1",
+        "--tracking",
+        "1",
+        "--models",
+        &s(&live_models),
+        "--json",
+        "--live",
+        "--lookaheads",
+        "0,8",
+    ]);
+    let with_variant: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let rows = with_variant["rows"].as_array().unwrap();
+    let cell = |method: &str, lookahead: u64, trained: bool| {
+        rows.iter()
+            .find(|r| r["method"] == method && r["lookahead"] == lookahead && r["trained_for_lookahead"] == trained)
+            .unwrap_or_else(|| panic!("no row {method} {lookahead} {trained}: {with_variant}"))
+    };
+    assert_eq!(rows.len(), 6);
+    assert!(rows.iter().all(|r| r["trained_for_lookahead"] == false || r["lookahead"] == 0));
+    for method in ["ego-only", "ego-exo"] {
+        assert_eq!(cell(method, 0, true)["mpjpe_cm"], cell(method, 0, false)["mpjpe_cm"]);
     }
 }
 

@@ -17,7 +17,7 @@ use egoexo_core::metrics::{MetricsAccumulator, MotionMetrics};
 use egoexo_infer::baselines::NearestNeighbourIndex;
 use egoexo_infer::inputs::{POSE_DIM, ego_window, window_targets};
 use egoexo_infer::windows::{WINDOW, plan_windows, valid_spans};
-use egoexo_infer::{Engine, Method, ReconstructOptions};
+use egoexo_infer::{Engine, LoadedModels, Method, ReconstructOptions};
 use egoexo_mocap::MotionLibrary;
 use egoexo_session::align::{AlignOptions, align};
 use egoexo_synth::rng::SimRng;
@@ -362,6 +362,9 @@ pub const LIVE_LOOKAHEADS: [usize; 4] = [0, 4, 8, 16];
 pub struct LiveEvalRow {
     pub method: Method,
     pub lookahead: usize,
+    /// Read out by the live variant trained for this lookahead (else by the offline networks).
+    #[serde(default)]
+    pub trained_for_lookahead: bool,
     #[serde(flatten)]
     pub metrics: MotionMetrics,
     /// MPJPE between the live and the offline joints, cm.
@@ -387,11 +390,12 @@ pub struct LiveEvalReport {
 
 /// The live reconstruction's accuracy: every frame `f` read out of the 96-frame window ending
 /// at `f + L` (as the page's worker does), for every method of `options` and every `L` of
-/// `lookaheads`; one window per end frame serves every lookahead. `progress(done, total)`
-/// counts clips.
+/// `lookaheads`, by the offline networks and, where `models` has one, by the live variant
+/// trained for `L`; one window per end frame and networks serves every lookahead.
+/// `progress(done, total)` counts clips.
 pub fn evaluate_live(
     library: &MotionLibrary,
-    engine: &Engine,
+    models: &LoadedModels,
     options: &EvalOptions,
     lookaheads: &[usize],
     progress: &mut dyn FnMut(usize, usize),
@@ -409,9 +413,18 @@ pub fn evaluate_live(
         method: method_names(methods),
         message: e.to_string(),
     };
+    let engine = models.offline();
+    // Columns: (lookahead, the engine that reads it out, whether that is a live variant).
+    let mut columns: Vec<(usize, &Engine, bool)> = lookaheads.iter().map(|&l| (l, engine, false)).collect();
+    for &lookahead in lookaheads {
+        let live = models.for_lookahead(lookahead);
+        if live.models(options.tracking).is_some_and(|m| m.manifest.lookahead == Some(lookahead)) {
+            columns.push((lookahead, live, true));
+        }
+    }
     let mut offline_acc: Vec<MetricsAccumulator> = methods.iter().map(|_| MetricsAccumulator::new()).collect();
     let cell = || -> Vec<Vec<MetricsAccumulator>> {
-        methods.iter().map(|_| lookaheads.iter().map(|_| MetricsAccumulator::new()).collect()).collect()
+        methods.iter().map(|_| columns.iter().map(|_| MetricsAccumulator::new()).collect()).collect()
     };
     let (mut live_acc, mut vs_offline_acc) = (cell(), cell());
     let mut frames = 0;
@@ -430,20 +443,30 @@ pub fn evaluate_live(
                 continue;
             }
             let scored = span.start..span.end - max_lookahead;
-            // live[method][lookahead][frame - scored.start]
+            // live[method][column][frame - scored.start]
             let mut live: Vec<Vec<Vec<[egoexo_core::glam::Vec3; egoexo_core::skeleton::NUM_JOINTS]>>> =
-                vec![vec![Vec::with_capacity(scored.len()); lookaheads.len()]; methods.len()];
+                vec![vec![Vec::with_capacity(scored.len()); columns.len()]; methods.len()];
             for end in span.clone() {
                 let start = (end + 1).saturating_sub(WINDOW).max(span.start);
                 let window = aligned.frames_slice(start..end + 1);
-                let results =
+                let offline_results =
                     engine.reconstruct_each(&window, &window_options, methods, &mut |_| true).map_err(fail)?;
-                for (m, result) in results.iter().enumerate() {
-                    for (l, &lookahead) in lookaheads.iter().enumerate() {
-                        let Some(frame) = end.checked_sub(lookahead) else { continue };
-                        if frame >= start && scored.contains(&frame) {
-                            live[m][l].push(result.joints[frame - start]);
-                        }
+                for (c, &(lookahead, column_engine, trained)) in columns.iter().enumerate() {
+                    let Some(frame) = end.checked_sub(lookahead) else { continue };
+                    if frame < start || !scored.contains(&frame) {
+                        continue;
+                    }
+                    let live_results;
+                    let results = if trained {
+                        live_results = column_engine
+                            .reconstruct_each(&window, &window_options, methods, &mut |_| true)
+                            .map_err(fail)?;
+                        &live_results
+                    } else {
+                        &offline_results
+                    };
+                    for (m, result) in results.iter().enumerate() {
+                        live[m][c].push(result.joints[frame - start]);
                     }
                 }
             }
@@ -453,9 +476,9 @@ pub fn evaluate_live(
             for (m, result) in offline.iter().enumerate() {
                 let offline_joints = &result.joints[scored.clone()];
                 offline_acc[m].add_segment(offline_joints, truth, fps, None)?;
-                for l in 0..lookaheads.len() {
-                    live_acc[m][l].add_segment(&live[m][l], truth, fps, None)?;
-                    vs_offline_acc[m][l].add_segment(&live[m][l], offline_joints, fps, None)?;
+                for c in 0..columns.len() {
+                    live_acc[m][c].add_segment(&live[m][c], truth, fps, None)?;
+                    vs_offline_acc[m][c].add_segment(&live[m][c], offline_joints, fps, None)?;
                 }
             }
         }
@@ -465,10 +488,17 @@ pub fn evaluate_live(
     let mut rows = Vec::new();
     for (m, &method) in methods.iter().enumerate() {
         let Some(offline) = offline_acc[m].finish() else { continue };
-        for (l, &lookahead) in lookaheads.iter().enumerate() {
-            let (Some(metrics), Some(vs)) = (live_acc[m][l].finish(), vs_offline_acc[m][l].finish()) else { continue };
+        for (c, &(lookahead, _, trained_for_lookahead)) in columns.iter().enumerate() {
+            let (Some(metrics), Some(vs)) = (live_acc[m][c].finish(), vs_offline_acc[m][c].finish()) else { continue };
             let mpjpe_ratio = metrics.mpjpe_cm / offline.mpjpe_cm;
-            rows.push(LiveEvalRow { method, lookahead, metrics, vs_offline_cm: vs.mpjpe_cm, mpjpe_ratio });
+            rows.push(LiveEvalRow {
+                method,
+                lookahead,
+                trained_for_lookahead,
+                metrics,
+                vs_offline_cm: vs.mpjpe_cm,
+                mpjpe_ratio,
+            });
         }
         offline_rows.push(EvalRow { method, metrics: offline });
     }
@@ -483,7 +513,8 @@ pub fn evaluate_live(
     })
 }
 
-/// The live table (markdown): offline and each lookahead per method.
+/// The live table (markdown): offline and each lookahead per method; `L (live)` rows are read
+/// out by the variant trained for `L`.
 pub fn format_live_table(report: &LiveEvalReport) -> String {
     let mut out = format!(
         "**live, {}-point tracking, {} observer(s), subjects {:?}: {} clips, {} frames**\n\n",
@@ -497,12 +528,15 @@ pub fn format_live_table(report: &LiveEvalReport) -> String {
             "| {} | offline | – | {:.2} | {:.2} | {:.2} | – | 1.00 |\n",
             offline.method, m.mpjpe_cm, m.lower_cm, m.jitter
         ));
-        for row in report.rows.iter().filter(|r| r.method == offline.method) {
+        let mut rows: Vec<&LiveEvalRow> = report.rows.iter().filter(|r| r.method == offline.method).collect();
+        rows.sort_by_key(|r| (r.lookahead, r.trained_for_lookahead));
+        for row in rows {
             let m = &row.metrics;
             out.push_str(&format!(
-                "| {} | {} | {:.0} ms | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |\n",
+                "| {} | {}{} | {:.0} ms | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |\n",
                 row.method,
                 row.lookahead,
+                if row.trained_for_lookahead { " (live)" } else { "" },
                 row.lookahead as f64 * 1000.0 / 30.0,
                 m.mpjpe_cm,
                 m.lower_cm,

@@ -15,8 +15,8 @@
 //! - [`windows`] — valid spans, 96-frame windows, cross-fade weights.
 //! - [`inputs`] — the networks' input tensors (shared with the training shards): ego
 //!   features, coarse poses, rays, gate features, masks, targets.
-//! - [`models`] — ONNX models loaded from bytes and run by tract; [`manifest`] —
-//!   `models/manifest.json`.
+//! - [`models`] — ONNX models loaded from bytes and run by tract, [`LoadedModels`] (the
+//!   offline networks and the live variants per lookahead); [`manifest`] — `models/manifest.json`.
 //! - [`baselines`] — rest pose and nearest neighbour.
 //!
 //! Nothing here does I/O (models arrive as bytes), spawns threads or reads the clock, so the
@@ -35,7 +35,7 @@ pub mod windows;
 
 pub use engine::{Engine, Method, ObserverGates, Progress, ReconstructOptions, Reconstruction, Stage};
 pub use job::ReconstructionJob;
-pub use models::NetworkRuns;
+pub use models::{LoadedModels, NetworkRuns};
 
 use thiserror::Error;
 

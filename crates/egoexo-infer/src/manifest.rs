@@ -51,10 +51,15 @@ impl Default for ExoTokenLayout {
     }
 }
 
-/// The networks of one tracking mode.
+/// The networks of one tracking mode: the offline ones (read out near the window's centre),
+/// or a live variant trained to be read out `lookahead` frames before the window's newest frame.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ModelSetManifest {
     pub tracking: TrackingMode,
+    /// Live variants: the read-out lookahead L (frames before the window's newest frame) the
+    /// networks were trained for. `None`: the offline networks, which every recording uses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lookahead: Option<usize>,
     pub ego_feature_layout: EgoFeatureLayout,
     pub gate_feature_layout: GateFeatureLayout,
     #[serde(default)]
@@ -104,8 +109,21 @@ impl Manifest {
                 self.window
             )));
         }
-        for set in &self.model_sets {
+        for (i, set) in self.model_sets.iter().enumerate() {
             let mode = set.tracking.points();
+            if let Some(lookahead) = set.lookahead
+                && lookahead >= WINDOW
+            {
+                return Err(InferError::Manifest(format!(
+                    "manifest.json: {mode}-point live set has lookahead {lookahead}, expected below the window ({WINDOW})"
+                )));
+            }
+            if self.model_sets[..i].iter().any(|s| s.tracking == set.tracking && s.lookahead == set.lookahead) {
+                return Err(InferError::Manifest(format!(
+                    "manifest.json: two {mode}-point sets with {}",
+                    set.lookahead.map_or("no lookahead (offline)".to_string(), |l| format!("lookahead {l}"))
+                )));
+            }
             if set.ego_feature_layout.version != EGO_FEATURE_LAYOUT_VERSION {
                 return Err(InferError::Manifest(format!(
                     "manifest.json: {mode}-point models expect ego feature layout v{}, this build computes v{EGO_FEATURE_LAYOUT_VERSION}",
@@ -137,12 +155,37 @@ impl Manifest {
                 )));
             }
         }
+        let files: Vec<&ModelFile> = self.model_sets.iter().flat_map(|s| [&s.egonet, &s.gate, &s.fusion]).collect();
+        for (i, file) in files.iter().enumerate() {
+            if files[..i].iter().any(|f| f.file == file.file && f.sha256 != file.sha256) {
+                return Err(InferError::Manifest(format!(
+                    "manifest.json: `{}` is listed twice with different sha256",
+                    file.file
+                )));
+            }
+        }
         Ok(())
     }
 
-    /// The model set for a tracking mode, if shipped.
+    /// The offline model set for a tracking mode, if shipped.
     pub fn model_set(&self, tracking: TrackingMode) -> Option<&ModelSetManifest> {
-        self.model_sets.iter().find(|s| s.tracking == tracking)
+        self.model_sets.iter().find(|s| s.tracking == tracking && s.lookahead.is_none())
+    }
+
+    /// The live variant trained for `lookahead`, if shipped.
+    pub fn live_model_set(&self, tracking: TrackingMode, lookahead: usize) -> Option<&ModelSetManifest> {
+        self.model_sets.iter().find(|s| s.tracking == tracking && s.lookahead == Some(lookahead))
+    }
+
+    /// Every file of every set once (live variants share the offline EgoNet), in set order.
+    pub fn files(&self) -> Vec<&ModelFile> {
+        let mut files: Vec<&ModelFile> = Vec::new();
+        for file in self.model_sets.iter().flat_map(|set| [&set.egonet, &set.gate, &set.fusion]) {
+            if !files.iter().any(|f| f.file == file.file) {
+                files.push(file);
+            }
+        }
+        files
     }
 }
 

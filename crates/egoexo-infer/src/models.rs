@@ -2,6 +2,7 @@
 //! compiled into the binary), checked against the manifest, optimised once for their fixed
 //! input shapes, and reused for every window.
 
+use std::collections::BTreeMap;
 use std::io::Cursor;
 use std::ops::{Add, Sub};
 use std::sync::Arc;
@@ -11,7 +12,8 @@ use serde::{Deserialize, Serialize};
 use tract_onnx::prelude::*;
 
 use crate::InferError;
-use crate::manifest::{ModelFile, ModelSetManifest, sha256_hex};
+use crate::engine::Engine;
+use crate::manifest::{Manifest, ModelFile, ModelSetManifest, sha256_hex};
 
 /// One optimised ONNX graph with fixed input shapes. Clones share the graph and the run
 /// counter.
@@ -126,7 +128,20 @@ impl ModelSet {
         manifest: &ModelSetManifest,
         mut read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
     ) -> Result<Self, InferError> {
+        Self::load_sharing(manifest, &mut read, &mut Vec::new())
+    }
+
+    /// [`ModelSet::load`] reusing the models already in `loaded` (by file and sha256) and
+    /// adding the ones it loads.
+    fn load_sharing(
+        manifest: &ModelSetManifest,
+        read: &mut dyn FnMut(&str) -> Result<Vec<u8>, InferError>,
+        loaded: &mut Vec<(ModelFile, OnnxModel)>,
+    ) -> Result<Self, InferError> {
         let mut load = |file: &ModelFile| -> Result<OnnxModel, InferError> {
+            if let Some((_, model)) = loaded.iter().find(|(f, _)| f.file == file.file && f.sha256 == file.sha256) {
+                return Ok(model.clone());
+            }
             let bytes = read(&file.file)?;
             let digest = sha256_hex(&bytes);
             if digest != file.sha256 {
@@ -137,7 +152,9 @@ impl ModelSet {
                 });
             }
             let shapes: Vec<Vec<usize>> = file.inputs.iter().map(|i| i.shape.clone()).collect();
-            OnnxModel::load(&file.file, &bytes, &shapes)
+            let model = OnnxModel::load(&file.file, &bytes, &shapes)?;
+            loaded.push((file.clone(), model.clone()));
+            Ok(model)
         };
         Ok(Self {
             egonet: load(&manifest.egonet)?,
@@ -145,5 +162,63 @@ impl ModelSet {
             fusion: load(&manifest.fusion)?,
             manifest: manifest.clone(),
         })
+    }
+}
+
+/// Every model set of a manifest, each file parsed once: an engine with the offline networks
+/// (what recordings use) and, per lookahead that live variants were trained for, an engine
+/// with those variants (and the offline networks of modes without one).
+#[derive(Clone, Debug, Default)]
+pub struct LoadedModels {
+    offline: Engine,
+    live: BTreeMap<usize, Engine>,
+}
+
+impl LoadedModels {
+    /// Loads every set of `manifest`, reading each file through `read` (a path relative to the
+    /// models folder → bytes) once and checking its sha256.
+    pub fn load(
+        manifest: &Manifest,
+        mut read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
+    ) -> Result<Self, InferError> {
+        let mut loaded = Vec::new();
+        let mut offline_sets = Vec::new();
+        let mut live_sets: BTreeMap<usize, Vec<ModelSet>> = BTreeMap::new();
+        for set in &manifest.model_sets {
+            let models = ModelSet::load_sharing(set, &mut read, &mut loaded)?;
+            match set.lookahead {
+                None => offline_sets.push(models),
+                Some(lookahead) => live_sets.entry(lookahead).or_default().push(models),
+            }
+        }
+        let offline = offline_sets.iter().cloned().fold(Engine::new(), Engine::with_models);
+        let live = live_sets
+            .into_iter()
+            .map(|(lookahead, sets)| (lookahead, sets.into_iter().fold(offline.clone(), Engine::with_models)))
+            .collect();
+        Ok(Self { offline, live })
+    }
+
+    /// The offline networks.
+    pub fn offline(&self) -> &Engine {
+        &self.offline
+    }
+
+    /// The networks to read windows out at `lookahead` frames before their newest frame: the
+    /// live variants trained for it where shipped, the offline networks otherwise (per mode;
+    /// [`ModelSetManifest::lookahead`] of [`Engine::models`] tells which).
+    pub fn for_lookahead(&self, lookahead: usize) -> &Engine {
+        self.live.get(&lookahead).unwrap_or(&self.offline)
+    }
+
+    /// The lookaheads live variants were trained for (ascending).
+    pub fn live_lookaheads(&self) -> Vec<usize> {
+        self.live.keys().copied().collect()
+    }
+
+    /// How often the offline networks have run since loading (the EgoNet live variants share
+    /// counts too; their own gates and fusion networks are not counted).
+    pub fn network_runs(&self) -> NetworkRuns {
+        self.offline.network_runs()
     }
 }

@@ -447,6 +447,10 @@ pub struct LiveFrameInfo {
     pub lookahead: usize,
     /// `ego-exo`, or `ego-only` when no observer has keypoints of this frame.
     pub method: String,
+    /// Whether the networks were trained for this lookahead (a live variant); `false`: the
+    /// offline networks, trained for windows read out near their centre.
+    #[serde(default)]
+    pub trained_for_lookahead: bool,
     /// Observers whose rays (gate ≥ 0.5) shaped this frame.
     pub exo_observers: Vec<String>,
     /// Whether the wearer's head was tracked at this frame.
@@ -474,6 +478,9 @@ pub struct ModelSetSummary {
     pub tracking_points: u8,
     pub max_observers: usize,
     pub hidden_dim: usize,
+    /// A live variant's read-out lookahead (frames); `None` for the offline networks.
+    #[serde(default)]
+    pub lookahead: Option<usize>,
 }
 
 /// The loaded models.

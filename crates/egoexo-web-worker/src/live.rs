@@ -56,6 +56,9 @@ pub struct LiveFrame {
     /// The method that made it: ego-exo, or ego-only when no observer has keypoints of this
     /// frame.
     pub method: Method,
+    /// Whether the networks were a live variant trained for the reconstructor's lookahead
+    /// (else the offline ones).
+    pub trained_for_lookahead: bool,
     /// Observers that contributed a ray with gate ≥ 0.5 to this frame.
     pub exo_observers: Vec<String>,
     /// Whether the wearer's head was tracked at this frame.
@@ -193,6 +196,9 @@ impl LiveReconstructor {
             window: start..end + 1,
             scene_json: serde_json::to_vec(&scene).map_err(|e| LiveError::Scene(e.to_string()))?,
             method,
+            trained_for_lookahead: engine
+                .models(recon.tracking)
+                .is_some_and(|m| m.manifest.lookahead == Some(self.lookahead)),
             exo_observers,
             tracked: recon.valid.get(index).copied().unwrap_or(false),
             skipped,
@@ -220,6 +226,7 @@ impl LiveFrame {
             window_frames: self.window.len(),
             lookahead,
             method: self.method.name().to_string(),
+            trained_for_lookahead: self.trained_for_lookahead,
             exo_observers: self.exo_observers.clone(),
             tracked: self.tracked,
             skipped: self.skipped,

@@ -13,9 +13,8 @@ use egoexo_core::aligned::AlignedSession;
 use egoexo_core::camera::Projection;
 use egoexo_core::metrics::MetricsAccumulator;
 use egoexo_infer::manifest::Manifest;
-use egoexo_infer::models::ModelSet;
 use egoexo_infer::{
-    Engine, InferError, Method, NetworkRuns, ReconstructOptions, Reconstruction, ReconstructionJob, Stage,
+    InferError, LoadedModels, Method, NetworkRuns, ReconstructOptions, Reconstruction, ReconstructionJob, Stage,
 };
 use egoexo_motion_io::{ExportError, Format};
 use egoexo_protocol::worker::{
@@ -150,7 +149,7 @@ pub struct ReconstructionTask {
 /// The worker: models, the open session and its reconstructions.
 #[derive(Debug, Default)]
 pub struct SessionWorker {
-    engine: Option<Engine>,
+    models: Option<LoadedModels>,
     manifest: Option<Manifest>,
     session: Option<OpenSession>,
     results: Option<Results>,
@@ -166,45 +165,46 @@ impl SessionWorker {
     pub fn model_files(manifest_json: &[u8]) -> Result<Vec<ModelFileRef>, WorkerError> {
         let manifest = Manifest::from_json(manifest_json).map_err(WorkerError::Models)?;
         Ok(manifest
-            .model_sets
-            .iter()
-            .flat_map(|set| [&set.egonet, &set.gate, &set.fusion])
+            .files()
+            .into_iter()
             .map(|f| ModelFileRef { file: f.file.clone(), sha256: f.sha256.clone(), bytes: f.bytes })
             .collect())
     }
 
-    /// Loads every model set of the manifest, reading each file through `read` (path relative
-    /// to the models folder → bytes); each file's sha256 is checked against the manifest.
+    /// Loads every model set of the manifest (the offline networks and any live variants),
+    /// reading each file once through `read` (path relative to the models folder → bytes);
+    /// each file's sha256 is checked against the manifest.
     pub fn load_models(
         &mut self,
         manifest_json: &[u8],
-        mut read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
+        read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
     ) -> Result<ModelsSummary, WorkerError> {
         let manifest = Manifest::from_json(manifest_json).map_err(WorkerError::Models)?;
-        let mut engine = Engine::new();
-        let mut sets = Vec::new();
-        for set in &manifest.model_sets {
-            engine = engine.with_models(ModelSet::load(set, &mut read).map_err(WorkerError::Models)?);
-            sets.push(ModelSetSummary {
+        let models = LoadedModels::load(&manifest, read).map_err(WorkerError::Models)?;
+        let sets = manifest
+            .model_sets
+            .iter()
+            .map(|set| ModelSetSummary {
                 tracking_points: set.tracking.points(),
                 max_observers: set.max_observers,
                 hidden_dim: set.hidden_dim,
-            });
-        }
-        let bytes = Self::model_files(manifest_json)?.iter().map(|f| f.bytes).sum();
-        self.engine = Some(engine);
+                lookahead: set.lookahead,
+            })
+            .collect();
+        let bytes = manifest.files().iter().map(|f| f.bytes).sum();
+        self.models = Some(models);
         self.manifest = Some(manifest);
         Ok(ModelsSummary { model_sets: sets, bytes })
     }
 
     /// Whether models are loaded.
     pub fn has_models(&self) -> bool {
-        self.engine.is_some()
+        self.models.is_some()
     }
 
     /// How often each network has run since the models were loaded.
     pub fn network_runs(&self) -> NetworkRuns {
-        self.engine.as_ref().map(Engine::network_runs).unwrap_or_default()
+        self.models.as_ref().map(LoadedModels::network_runs).unwrap_or_default()
     }
 
     /// Imports a zip archive (`.egoexo` or a zipped Aria MPS / Nymeria folder) from its bytes.
@@ -255,7 +255,7 @@ impl SessionWorker {
     /// `ego_only_overlay`, ego-only for the comparison overlay (one shared ego pass). The
     /// previous results are dropped. Step it with [`SessionWorker::step_reconstruction`].
     pub fn start_reconstruction(&mut self, ego_only_overlay: bool) -> Result<ReconstructionTask, WorkerError> {
-        let engine = self.engine.as_ref().ok_or(WorkerError::NoModels)?;
+        let engine = self.models.as_ref().ok_or(WorkerError::NoModels)?.offline();
         let fps = self.fps();
         let open = self.session.as_mut().ok_or(WorkerError::NoSession)?;
         if open.aligned.timeline.fps != fps {
@@ -270,7 +270,7 @@ impl SessionWorker {
 
     /// Runs the next window of `task`; `None` when every pass is done.
     pub fn step_reconstruction(&self, task: &mut ReconstructionTask) -> Result<Option<JobProgress>, WorkerError> {
-        let engine = self.engine.as_ref().ok_or(WorkerError::NoModels)?;
+        let engine = self.models.as_ref().ok_or(WorkerError::NoModels)?.offline();
         let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
         let Some(progress) = task.job.step(engine, &open.aligned)? else { return Ok(None) };
         let stage = match progress.stage {
@@ -284,7 +284,7 @@ impl SessionWorker {
     /// Finishes `task` (every step must have run) and keeps its results for the scene and
     /// the exports.
     pub fn finish_reconstruction(&mut self, task: ReconstructionTask) -> Result<ReconstructionSummary, WorkerError> {
-        let engine = self.engine.as_ref().ok_or(WorkerError::NoModels)?;
+        let engine = self.models.as_ref().ok_or(WorkerError::NoModels)?.offline();
         let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
         let windows = task.job.plan().windows.len();
         let runs = engine.network_runs() - task.runs_before;
@@ -335,8 +335,8 @@ impl SessionWorker {
         &self,
         live: &mut crate::live::LiveReconstructor,
     ) -> Result<Option<crate::live::LiveFrame>, WorkerError> {
-        let engine = self.engine.as_ref().ok_or(WorkerError::NoModels)?;
-        Ok(live.reconstruct_next(engine)?)
+        let models = self.models.as_ref().ok_or(WorkerError::NoModels)?;
+        Ok(live.reconstruct_next(models.for_lookahead(live.lookahead()))?)
     }
 
     /// "Stop and keep": the take becomes the open session (replacing any), ready for the

@@ -16,9 +16,13 @@ use egoexo_web_worker::SessionWorker;
 use egoexo_web_worker::live::LiveReconstructor;
 
 fn worker() -> SessionWorker {
+    worker_with(MANIFEST)
+}
+
+fn worker_with(manifest: &[u8]) -> SessionWorker {
     let mut worker = SessionWorker::new();
     worker
-        .load_models(MANIFEST, |file| {
+        .load_models(manifest, |file| {
             model_file(file).map(<[u8]>::to_vec).ok_or(InferError::ReadModel { file: file.into(), message: "?".into() })
         })
         .unwrap();
@@ -100,6 +104,7 @@ fn a_streamed_take_is_shown_frame_by_frame_at_the_models_rate_and_kept() {
         let on_grid = first + (f.frame as f64 * 1e9 / 30.0).round() as i64;
         assert!((f.timestamp_ns - on_grid).abs() < 1_000_000, "frame {} at {} ns", f.frame, f.timestamp_ns);
         assert!(f.tracked);
+        assert!(!f.trained_for_lookahead, "the fixture manifest has no live variants");
         assert!(f.exo_observers.is_empty() || f.method == Method::EgoExo);
         let scene: SceneData = serde_json::from_slice(&f.scene_json).unwrap();
         scene.check().unwrap();
@@ -155,4 +160,38 @@ fn a_busy_worker_skips_to_the_newest_frame_and_without_observers_says_ego_only()
     // The newest frame, then nothing new: nothing to show.
     assert!(worker.live_frame(&mut live).unwrap().is_some());
     assert!(worker.live_frame(&mut live).unwrap().is_none());
+}
+
+#[test]
+fn a_live_variant_for_the_lookahead_reads_the_frames_out_and_other_lookaheads_use_the_offline_networks() {
+    // The fixture manifest with a 3-point live set for lookahead 2 (the fixture's 3-point
+    // files: the choice of networks is what is tested here, not their training).
+    let mut manifest: serde_json::Value = serde_json::from_slice(MANIFEST).unwrap();
+    let sets = manifest["model_sets"].as_array_mut().unwrap();
+    let mut live_set = sets.iter().find(|s| s["tracking"] == "three_point").unwrap().clone();
+    live_set["lookahead"] = serde_json::Value::from(2);
+    sets.push(live_set);
+    let manifest = manifest.to_string();
+    let worker = worker_with(manifest.as_bytes());
+    assert_eq!(SessionWorker::model_files(manifest.as_bytes()).unwrap().len(), 6, "shared files listed once");
+    let session = session();
+    let (messages, frames) = as_relay(&session, true);
+    for (lookahead, trained) in [(2, true), (3, false)] {
+        let mut live = LiveReconstructor::new(worker.live_fps(), lookahead);
+        for m in &messages {
+            live.handle_relay_message(m);
+        }
+        let mut shown = Vec::new();
+        for frame in frames.iter().take(600) {
+            live.add_frame(frame);
+            if frame.channel == 0
+                && let Some(f) = worker.live_frame(&mut live).unwrap()
+            {
+                shown.push(f);
+            }
+        }
+        assert!(shown.len() > 10);
+        assert!(shown.iter().all(|f| f.trained_for_lookahead == trained), "lookahead {lookahead}");
+        assert_eq!(shown[0].info(lookahead).trained_for_lookahead, trained);
+    }
 }

@@ -9,7 +9,7 @@ use egoexo_dataset::eval::{
 use egoexo_infer::{Engine, Method};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::models::{load_model_set, read_manifest};
+use super::models::{load_all_models, load_model_set, read_manifest};
 use super::simulation::SimulationArgs;
 
 #[derive(clap::Args)]
@@ -23,7 +23,9 @@ pub struct Args {
     #[arg(long)]
     pub json: bool,
     /// The live table instead: ego-only and ego-exo read out each lookahead before their
-    /// window's end, as the page reconstructs live, against the offline result (needs --models).
+    /// window's end, as the page reconstructs live, against the offline result (needs --models);
+    /// by the offline networks and, where the manifest ships one, the live variant trained for
+    /// that lookahead.
     #[arg(long)]
     pub live: bool,
     /// Lookaheads of the live table, frames.
@@ -35,32 +37,6 @@ pub fn run(args: Args) -> Result<()> {
     let sim = &args.simulation;
     let library = sim.open_library()?;
     let tracking = sim.tracking_mode();
-    let training: Vec<u32> = library.subjects().into_iter().filter(|s| !sim.subjects.contains(s)).collect();
-    if training.is_empty() {
-        bail!("every subject of the library is being evaluated; the nearest-neighbour baseline needs other subjects");
-    }
-    let mut engine = Engine::new();
-    let mut methods = Vec::new();
-    if !args.live {
-        engine = engine
-            .with_nearest_neighbour(tracking, nearest_neighbour_index(&library, &training, tracking, sim.seed, 2)?);
-        methods.extend([Method::RestPose, Method::NearestNeighbour]);
-    }
-    if let Some(dir) = &args.models {
-        let manifest = read_manifest(dir)?;
-        let set = load_model_set(dir, &manifest, tracking)?
-            .with_context(|| format!("{} has no {}-point models", dir.display(), tracking.points()))?;
-        engine = engine.with_models(set);
-        methods.extend([Method::EgoOnly, Method::EgoExo, Method::EgoExoUngated]);
-    }
-    if args.live {
-        if args.models.is_none() {
-            bail!("--live compares the networks' live and offline results: pass --models DIR");
-        }
-        methods = vec![Method::EgoOnly, Method::EgoExo];
-    }
-    let options =
-        EvalOptions { subjects: sim.subjects.clone(), observers: sim.observers, tracking, seed: sim.seed, methods };
     let bar = if args.json { ProgressBar::hidden() } else { ProgressBar::new(0) };
     bar.set_style(
         ProgressStyle::with_template("eval {bar:40} {pos}/{len} clips [{elapsed_precise}]")
@@ -71,7 +47,21 @@ pub fn run(args: Args) -> Result<()> {
         bar.set_position(done as u64);
     };
     if args.live {
-        let report = evaluate_live(&library, &engine, &options, &args.lookaheads, &mut progress)?;
+        let Some(dir) = &args.models else {
+            bail!("--live compares the networks' live and offline results: pass --models DIR");
+        };
+        let models = load_all_models(dir, &read_manifest(dir)?)?;
+        if models.offline().models(tracking).is_none() {
+            bail!("{} has no {}-point models", dir.display(), tracking.points());
+        }
+        let options = EvalOptions {
+            subjects: sim.subjects.clone(),
+            observers: sim.observers,
+            tracking,
+            seed: sim.seed,
+            methods: vec![Method::EgoOnly, Method::EgoExo],
+        };
+        let report = evaluate_live(&library, &models, &options, &args.lookaheads, &mut progress)?;
         bar.finish_and_clear();
         if args.json {
             println!("{}", serde_json::to_string(&report)?);
@@ -80,6 +70,25 @@ pub fn run(args: Args) -> Result<()> {
         }
         return Ok(());
     }
+    let training: Vec<u32> = library.subjects().into_iter().filter(|s| !sim.subjects.contains(s)).collect();
+    if training.is_empty() {
+        bail!("every subject of the library is being evaluated; the nearest-neighbour baseline needs other subjects");
+    }
+    let engine = Engine::new()
+        .with_nearest_neighbour(tracking, nearest_neighbour_index(&library, &training, tracking, sim.seed, 2)?);
+    let mut methods = vec![Method::RestPose, Method::NearestNeighbour];
+    let engine = match &args.models {
+        Some(dir) => {
+            let manifest = read_manifest(dir)?;
+            let set = load_model_set(dir, &manifest, tracking)?
+                .with_context(|| format!("{} has no {}-point models", dir.display(), tracking.points()))?;
+            methods.extend([Method::EgoOnly, Method::EgoExo, Method::EgoExoUngated]);
+            engine.with_models(set)
+        }
+        None => engine,
+    };
+    let options =
+        EvalOptions { subjects: sim.subjects.clone(), observers: sim.observers, tracking, seed: sim.seed, methods };
     let report = evaluate(&library, &engine, &options, &mut progress)?;
     bar.finish_and_clear();
     if args.json {

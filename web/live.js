@@ -20,6 +20,7 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
     latencies: [], // ms, the last LATENCY_WINDOW
     computeMs: [], // ms the worker took per live frame, the last LATENCY_WINDOW
     arrivals: [], // ms from the frame's time to its arrival in the page (before drawing)
+    posted: [], // ms from the frame's time to the worker posting it (relay → worker → reconstructed)
     offsetMs: null, // relay clock − worker clock
     modes: new Set(), // methods seen (ego-exo, ego-only)
     devices: [],
@@ -186,6 +187,10 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
     if (live.offsetMs !== null) {
       live.arrivals.push(performance.timeOrigin + performance.now() + live.offsetMs - info.timestamp_ms);
       if (live.arrivals.length > LATENCY_WINDOW) live.arrivals.shift();
+      if (info.posted_ms !== null && info.posted_ms !== undefined) {
+        live.posted.push(info.posted_ms + live.offsetMs - info.timestamp_ms);
+        if (live.posted.length > LATENCY_WINDOW) live.posted.shift();
+      }
     }
     requestAnimationFrame(() => {
       if (live.offsetMs === null) return;

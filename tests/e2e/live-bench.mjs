@@ -3,7 +3,8 @@
 // `egoexo live replay --loop` of the sample (a wearer with wrists, two observers).
 // Usage: node tests/e2e/live-bench.mjs [seconds per lookahead]  (EGOEXO_E2E_URL, EGOEXO_BIN)
 // Prints `LIVEBENCH {json}`: per lookahead the latency p50/p95 (ms), the goal
-// (p95 ≤ 100 ms + L/30 s), the part of it before the page draws (arrival), the worker's
+// (p95 ≤ 100 ms + L/30 s), the part of it before the page draws (arrival) and before the
+// worker posts the frame (posted), the worker's
 // median ms per frame and the frames shown.
 
 import { spawn } from 'node:child_process';
@@ -44,6 +45,7 @@ try {
       l.latencies.length = 0;
       l.computeMs.length = 0;
       l.arrivals.length = 0;
+      l.posted.length = 0;
       return { frames: l.frames, skipped: l.take?.skipped ?? 0 };
     });
     await app.page.waitForTimeout(SECONDS * 1000);
@@ -53,8 +55,10 @@ try {
         frames: l.frames,
         latencies: [...l.latencies],
         arrivals: [...l.arrivals],
+        posted: [...l.posted],
         compute: [...l.computeMs],
         lastLookahead: l.lastFrame?.lookahead,
+        trained: l.lastFrame?.trained_for_lookahead,
       };
     });
     const p95 = percentile(after.latencies, 0.95);
@@ -68,8 +72,13 @@ try {
       meets_goal: p95 !== null && p95 <= goal,
       // The part before the page draws: device → relay → worker → reconstructed → posted.
       arrival_p50_ms: percentile(after.arrivals, 0.5),
+      // … of which up to the worker's post: device → relay → worker, waiting, reconstructing.
+      posted_p50_ms: percentile(after.posted, 0.5),
+      posted_p95_ms: percentile(after.posted, 0.95),
       worker_ms_per_frame: median(after.compute),
       read_out_at: after.lastLookahead,
+      // Read out by a live variant trained for this lookahead (else the offline networks).
+      live_networks: after.trained ?? false,
     });
     console.error(`lookahead ${lookahead}: ${JSON.stringify(rows.at(-1))}`);
   }

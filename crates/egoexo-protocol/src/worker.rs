@@ -460,6 +460,11 @@ pub struct LiveFrameInfo {
     /// What making it took in the worker (the take's window, alignment, engine, scene),
     /// milliseconds, by the glue's clock (`None` without one).
     pub compute_ms: Option<f64>,
+    /// When the worker posted it, Unix milliseconds by the glue's clock (the worker's own
+    /// clock; `None` without one): with the page's offset to the relay clock it splits the
+    /// latency into the part up to the worker's post and the part after.
+    #[serde(default)]
+    pub posted_ms: Option<f64>,
 }
 
 /// One file a models manifest lists.

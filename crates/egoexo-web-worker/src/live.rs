@@ -231,6 +231,7 @@ impl LiveFrame {
             tracked: self.tracked,
             skipped: self.skipped,
             compute_ms: None,
+            posted_ms: None,
         }
     }
 }

@@ -186,7 +186,7 @@ async fn reconstruct_loop(runtime: Rc<Runtime>) {
         match result {
             Ok(Some((frame, lookahead, compute_ms))) => runtime.post(WorkerEvent::LiveFrame {
                 scene: JsBytes::copy_from(&frame.scene_json),
-                frame: LiveFrameInfo { compute_ms, ..frame.info(lookahead) },
+                frame: LiveFrameInfo { compute_ms, posted_ms: runtime.clock_ms(), ..frame.info(lookahead) },
             }),
             Ok(None) => break,
             Err(e) => {

@@ -20,6 +20,7 @@ const state = {
   session: null, // the import summary
   scene: null, // the last scene JSON (Uint8Array)
   summary: null, // the last reconstruction summary
+  models: null, // the loaded models' summary: {model_sets: [{tracking_points, lookahead, …}], bytes}
   reconstructStarted: 0, // performance.now() when the reconstruction was asked for
   Viewer, // the viewer's class (off-screen renders in the tests)
   share: { apiBase: location.origin, server: null }, // the share API and its limits
@@ -114,8 +115,10 @@ function restartWorker() {
 function onWorkerEvent(event) {
   if (live.onEvent(event)) return;
   switch (event.type) {
-    case 'ready':
     case 'models':
+      state.models = event.summary;
+      break;
+    case 'ready':
     case 'cancelled':
       break;
     case 'status':

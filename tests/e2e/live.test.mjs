@@ -135,6 +135,10 @@ describe('live capture', () => {
     const shown = await live(app);
     assert.ok(shown.modes.includes('ego-exo') && shown.modes.includes('ego-only'), `modes ${shown.modes}`);
     assert.ok(shown.latencies > 30, 'latency measured');
+    // Read out by the live variant trained for the lookahead where the models include one.
+    const sets = await app.page.evaluate(() => window.egoexo.models.model_sets);
+    const variant = sets.some((s) => s.tracking_points === 3 && s.lookahead === shown.lastFrame.lookahead);
+    assert.equal(shown.lastFrame.trained_for_lookahead, variant, JSON.stringify({ sets, frame: shown.lastFrame }));
     const p95 = Number(await app.page.getAttribute('#live-latency', 'data-p95'));
     assert.ok(Number.isFinite(p95) && p95 > 0, `p95 ${p95}`);
     assert.match(await app.text('#live-latency'), /p50 \d+ ms, p95 \d+ ms/);

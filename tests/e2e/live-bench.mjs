@@ -4,8 +4,7 @@
 // Usage: node tests/e2e/live-bench.mjs [seconds per lookahead]  (EGOEXO_E2E_URL, EGOEXO_BIN)
 // Prints `LIVEBENCH {json}`: per lookahead the latency p50/p95 (ms), the goal
 // (p95 ≤ 100 ms + L/30 s), the part of it before the page draws (arrival) and before the
-// worker posts the frame (posted), the worker's
-// median ms per frame and the frames shown.
+// worker posts the frame (posted), the worker's median ms per frame and the frames shown.
 
 import { spawn } from 'node:child_process';
 

@@ -24,17 +24,13 @@ def figures(metrics: dict, ratio: float) -> dict:
             "jitter": round(metrics["jitter"], 2), "ratio": round(ratio, 2)}
 
 
-def method_name(method) -> str:
-    return method if isinstance(method, str) else str(method)
-
-
 def tables(report: dict) -> dict:
     """``{method: {"offline": ..., "L": ...}}`` for one tracking mode."""
     out = {}
     for row in report["offline"]:
-        out[method_name(row["method"]).replace("_", "-")] = {"offline": figures(row, 1.0)}
+        out[row["method"]] = {"offline": figures(row, 1.0)}
     for row in sorted(report["rows"], key=lambda r: (r["lookahead"], r.get("trained_for_lookahead", False))):
-        table = out[method_name(row["method"]).replace("_", "-")]
+        table = out[row["method"]]
         entry = figures(row, row["mpjpe_ratio"])
         key = str(row["lookahead"])
         if row.get("trained_for_lookahead"):
@@ -62,7 +58,7 @@ def main():
     used = {}
     for report in reports:
         for row in report["rows"]:
-            if method_name(row["method"]) == "ego-exo":
+            if row["method"] == "ego-exo":
                 key = (report["tracking"], row["lookahead"])
                 if row.get("trained_for_lookahead") or key not in used:
                     used[key] = row["mpjpe_ratio"]

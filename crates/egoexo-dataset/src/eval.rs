@@ -418,7 +418,7 @@ pub fn evaluate_live(
     let mut columns: Vec<(usize, &Engine, bool)> = lookaheads.iter().map(|&l| (l, engine, false)).collect();
     for &lookahead in lookaheads {
         let live = models.for_lookahead(lookahead);
-        if live.models(options.tracking).is_some_and(|m| m.manifest.lookahead == Some(lookahead)) {
+        if live.trained_for_lookahead(options.tracking, lookahead) {
             columns.push((lookahead, live, true));
         }
     }

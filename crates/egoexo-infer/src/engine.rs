@@ -229,6 +229,13 @@ impl Engine {
         self.models.get(&tracking.points())
     }
 
+    /// Whether the networks of `tracking` are a live variant trained to be read out
+    /// `lookahead` frames before the window's newest frame (else they are the offline ones, or
+    /// none are loaded).
+    pub fn trained_for_lookahead(&self, tracking: TrackingMode, lookahead: usize) -> bool {
+        self.models(tracking).is_some_and(|m| m.manifest.lookahead == Some(lookahead))
+    }
+
     /// The loaded networks of a tracking mode, or the error that names the mode.
     pub(crate) fn require_models(&self, tracking: TrackingMode) -> Result<&ModelSet, InferError> {
         self.models(tracking).ok_or(InferError::NoModels { points: tracking.points() })

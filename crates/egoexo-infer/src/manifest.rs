@@ -172,11 +172,6 @@ impl Manifest {
         self.model_sets.iter().find(|s| s.tracking == tracking && s.lookahead.is_none())
     }
 
-    /// The live variant trained for `lookahead`, if shipped.
-    pub fn live_model_set(&self, tracking: TrackingMode, lookahead: usize) -> Option<&ModelSetManifest> {
-        self.model_sets.iter().find(|s| s.tracking == tracking && s.lookahead == Some(lookahead))
-    }
-
     /// Every file of every set once (live variants share the offline EgoNet), in set order.
     pub fn files(&self) -> Vec<&ModelFile> {
         let mut files: Vec<&ModelFile> = Vec::new();

@@ -206,18 +206,13 @@ impl LoadedModels {
 
     /// The networks to read windows out at `lookahead` frames before their newest frame: the
     /// live variants trained for it where shipped, the offline networks otherwise (per mode;
-    /// [`ModelSetManifest::lookahead`] of [`Engine::models`] tells which).
+    /// [`Engine::trained_for_lookahead`] tells which).
     pub fn for_lookahead(&self, lookahead: usize) -> &Engine {
         self.live.get(&lookahead).unwrap_or(&self.offline)
     }
 
-    /// The lookaheads live variants were trained for (ascending).
-    pub fn live_lookaheads(&self) -> Vec<usize> {
-        self.live.keys().copied().collect()
-    }
-
-    /// How often the offline networks have run since loading (the EgoNet live variants share
-    /// counts too; their own gates and fusion networks are not counted).
+    /// How often the offline networks have run since loading. The EgoNet they share with live
+    /// variants counts every run; the variants' own gates and fusion networks are not counted.
     pub fn network_runs(&self) -> NetworkRuns {
         self.offline.network_runs()
     }

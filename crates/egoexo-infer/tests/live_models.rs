@@ -30,9 +30,11 @@ fn parse(manifest: &Value) -> Result<Manifest, InferError> {
 #[test]
 fn live_sets_are_chosen_by_lookahead_and_files_are_read_once() {
     let manifest = parse(&manifest_with_live_set(Value::from(0))).unwrap();
-    assert_eq!(manifest.model_set(TrackingMode::ThreePoint).unwrap().lookahead, None, "offline set first");
-    assert_eq!(manifest.live_model_set(TrackingMode::ThreePoint, 0).unwrap().lookahead, Some(0));
-    assert!(manifest.live_model_set(TrackingMode::OnePoint, 0).is_none());
+    assert_eq!(
+        manifest.model_set(TrackingMode::ThreePoint).unwrap().lookahead,
+        None,
+        "the offline set, not the variant"
+    );
     assert_eq!(manifest.files().len(), 6, "the live set's files are the offline ones");
 
     let dir = fixture_dir();
@@ -45,19 +47,27 @@ fn live_sets_are_chosen_by_lookahead_and_files_are_read_once() {
     assert_eq!(reads.len(), 6);
     assert!(reads.values().all(|&n| n == 1), "{reads:?}");
 
-    assert_eq!(models.live_lookaheads(), vec![0]);
-    let lookahead_of = |engine: &egoexo_infer::Engine, tracking| engine.models(tracking).unwrap().manifest.lookahead;
-    assert_eq!(lookahead_of(models.offline(), TrackingMode::ThreePoint), None);
-    assert_eq!(lookahead_of(models.for_lookahead(0), TrackingMode::ThreePoint), Some(0));
+    let (three, one) = (TrackingMode::ThreePoint, TrackingMode::OnePoint);
+    assert!(!models.offline().trained_for_lookahead(three, 0));
+    assert!(models.for_lookahead(0).trained_for_lookahead(three, 0));
     // No 1-point variant: the live engine falls back to the offline 1-point networks.
-    assert_eq!(lookahead_of(models.for_lookahead(0), TrackingMode::OnePoint), None);
+    assert!(models.for_lookahead(0).models(one).is_some_and(|m| m.manifest.lookahead.is_none()));
     // No variant for 4 frames: the offline networks.
-    assert_eq!(lookahead_of(models.for_lookahead(4), TrackingMode::ThreePoint), None);
+    assert!(!models.for_lookahead(4).trained_for_lookahead(three, 4));
+    assert!(models.for_lookahead(4).models(three).is_some_and(|m| m.manifest.lookahead.is_none()));
 }
 
 #[test]
-fn a_live_set_and_its_offline_set_reconstruct_alike_from_the_same_files() {
-    let manifest = parse(&manifest_with_live_set(Value::from(0))).unwrap();
+fn the_engine_for_a_lookahead_runs_the_variants_own_networks_and_shares_egonet() {
+    // A 3-point variant whose gate and fusion are other networks (the fixture's 1-point ones
+    // take the same tensor shapes), with the offline 3-point EgoNet.
+    let mut manifest = manifest_with_live_set(Value::from(0));
+    let one_point =
+        manifest["model_sets"].as_array().unwrap().iter().find(|s| s["tracking"] == "one_point").unwrap().clone();
+    let variant = manifest["model_sets"].as_array_mut().unwrap().last_mut().unwrap();
+    variant["gate"] = one_point["gate"].clone();
+    variant["fusion"] = one_point["fusion"].clone();
+    let manifest = parse(&manifest).unwrap();
     let dir = fixture_dir();
     let models = LoadedModels::load(&manifest, |file| {
         std::fs::read(dir.join(file)).map_err(|e| InferError::ReadModel { file: file.into(), message: e.to_string() })
@@ -65,9 +75,23 @@ fn a_live_set_and_its_offline_set_reconstruct_alike_from_the_same_files() {
     .unwrap();
     let aligned = aligned_session(3.2, 1, TrackingMode::ThreePoint, 3);
     let options = egoexo_infer::ReconstructOptions { stride: 96, ..Default::default() };
+    let offline_set = models.offline().models(TrackingMode::ThreePoint).unwrap();
+    let variant_set = models.for_lookahead(0).models(TrackingMode::ThreePoint).unwrap();
+    let runs = || (offline_set.runs(), variant_set.runs());
+    let before = runs();
     let offline = models.offline().reconstruct(&aligned, &options, &mut |_| true).unwrap();
+    let after_offline = runs();
     let live = models.for_lookahead(0).reconstruct(&aligned, &options, &mut |_| true).unwrap();
-    assert_eq!(offline.joints, live.joints);
+    let after_live = runs();
+    assert_eq!(offline.joints.len(), live.joints.len());
+    let moved = offline.joints.iter().zip(&live.joints).flat_map(|(a, b)| a.iter().zip(b)).map(|(a, b)| a.distance(*b));
+    assert!(moved.fold(0.0f32, f32::max) > 1e-3, "the variant's fusion did not change the joints");
+    // Each run used its own gate and fusion; both went through the one shared EgoNet.
+    let offline_run = (after_offline.0 - before.0, after_offline.1 - before.1);
+    let live_run = (after_live.0 - after_offline.0, after_live.1 - after_offline.1);
+    assert!(offline_run.0.fusion > 0 && offline_run.1.fusion == 0, "{offline_run:?}");
+    assert!(live_run.0.fusion == 0 && live_run.1.fusion > 0, "{live_run:?}");
+    assert!(live_run.0.egonet > 0 && live_run.0.egonet == live_run.1.egonet, "one shared EgoNet: {live_run:?}");
 }
 
 #[test]

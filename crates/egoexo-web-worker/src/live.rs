@@ -196,9 +196,7 @@ impl LiveReconstructor {
             window: start..end + 1,
             scene_json: serde_json::to_vec(&scene).map_err(|e| LiveError::Scene(e.to_string()))?,
             method,
-            trained_for_lookahead: engine
-                .models(recon.tracking)
-                .is_some_and(|m| m.manifest.lookahead == Some(self.lookahead)),
+            trained_for_lookahead: engine.trained_for_lookahead(recon.tracking, self.lookahead),
             exo_observers,
             tracked: recon.valid.get(index).copied().unwrap_or(false),
             skipped,

@@ -340,7 +340,11 @@ function showSession(s) {
   facts($('session-facts'), [
     ['source', s.source],
     ['timeline', `${s.frames} frames at ${s.fps} fps (${s.duration_s.toFixed(1)} s)`],
-    ['wearer', `${s.tracking_points}-point tracking: ${s.devices.join(', ')}`],
+    ['wearer', `${s.tracking_points}-point tracking: ${s.devices.join(', ')}`
+      + (s.tracking_reason ? ` (1-point because ${s.tracking_reason})` : '')],
+    ...(s.wrists ?? []).map((w) => [`${w.side} wrist`,
+      `tracked on ${w.tracked_percent.toFixed(1)}% of frames, longest gap ${w.longest_gap_s.toFixed(2)} s (${w.source})`]),
+    ['floor', s.floor ? `${s.floor.height_m.toFixed(3)} m, from ${s.floor.source}` : 'unknown'],
     ['observers', s.observers.length === 0 ? 'none' : s.observers.map((o) =>
       `${o.id} (${o.camera}, keypoints in ${o.keypoint_frames} frames)`).join('; ')],
     ['ground truth', s.ground_truth ? 'yes' : 'no'],

@@ -14,6 +14,9 @@ const SAMPLES = JSON.parse(readFileSync(join(REPO, 'public/samples/samples.json'
 const SAMPLE = SAMPLES.samples[0];
 // A multi-device Aria MPS folder (egoexo-session's committed fixture).
 const ARIA_FOLDER = join(REPO, 'crates/egoexo-session/tests/fixtures/aria_mps');
+// The wearer's glasses as MPS writes them: trajectory/ (semidense points) + hand_tracking/ (v2),
+// the right hand out of view from 0.2 to 0.5 s, the left from 0.8 to 1.3 s.
+const HANDS_FOLDER = join(REPO, 'crates/egoexo-session/tests/fixtures/aria_mps_hands');
 // Skeleton pixels of each side a drawn body must show (a blank or background-only canvas has
 // none; the body is small in the viewer's whole-scene framing).
 const MIN_SIDE_PIXELS = 20;
@@ -186,6 +189,34 @@ describe('bad input and failures', () => {
       assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
       assert.match(await app.text('#session-facts'), /multi-device Aria MPS folder/);
       assert.match(await app.text('#frame-count'), /^\d+ frames$/);
+      assert.deepEqual(app.errors, []);
+    } finally {
+      await app.close();
+    }
+  });
+
+  test('an MPS folder with hand tracking: wrist coverage, the floor, 1-point and why, wrists drawn only where tracked', async () => {
+    const app = await openApp(browser, '?backend=webgl2');
+    try {
+      await app.waitState('idle');
+      await app.page.setInputFiles('#folder-input', HANDS_FOLDER);
+      assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
+      const facts = await app.text('#session-facts');
+      assert.match(facts, /single Aria MPS device folder/);
+      assert.match(facts, /1-point tracking: head, left_wrist, right_wrist \(1-point because the wrists are tracked on only \d+% \(left\) and \d+% \(right\)/);
+      assert.match(facts, /left wrist\s*tracked on \d+\.\d% of frames, longest gap 0\.[45]\d s \(MPS wrist_and_palm_poses\.csv v2/);
+      assert.match(facts, /right wrist\s*tracked on \d+\.\d% of frames, longest gap 0\.[23]\d s/);
+      assert.match(facts, /floor\s*-?0\.0\d\d m, from semidense points \(\d+ well-constrained points at the floor/);
+      const scene = await app.page.evaluate(() => {
+        const s = typeof window.egoexo.scene === 'string' ? JSON.parse(window.egoexo.scene) : window.egoexo.scene;
+        return { floor_y: s.floor_y, fps: s.fps, devices: s.devices.map((d) => ({ name: d.name, valid: d.valid })) };
+      });
+      assert.ok(Math.abs(scene.floor_y) < 0.01, `the scene stands on the session's floor: ${scene.floor_y}`);
+      const valid = (name, t) => scene.devices.find((d) => d.name === name).valid[Math.round(t * scene.fps)];
+      assert.equal(valid('right_wrist', 0.35), false, 'the right wrist is not drawn while out of view');
+      assert.equal(valid('right_wrist', 1.0), true);
+      assert.equal(valid('left_wrist', 1.0), false, 'the left wrist is not drawn while out of view');
+      assert.equal(valid('left_wrist', 0.4), true);
       assert.deepEqual(app.errors, []);
     } finally {
       await app.close();

@@ -71,6 +71,79 @@ fn inspect_reports_devices_rates_observers_coverage_and_problems() {
     assert_eq!(cells, ["observer-2/keypoints", "61", "/", "61", "100.0%"]);
 }
 
+/// The wearer's glasses as MPS writes them: `trajectory/` (1 kHz, 3 s, gravity −Z, semidense
+/// points with a floor at z = 0) and `hand_tracking/wrist_and_palm_poses.csv` v2 at 30 Hz with
+/// the right hand out of view from 1 s to 2 s.
+fn write_mps_wearer(dir: &Path) {
+    use std::fmt::Write as _;
+    use std::io::Write as _;
+
+    use egoexo_core::glam::{Quat, Vec3};
+    use egoexo_core::rigid::RigidTransform;
+    use egoexo_session::aria::trajectory::write_closed_loop_trajectory;
+
+    std::fs::create_dir_all(dir.join("trajectory")).unwrap();
+    std::fs::create_dir_all(dir.join("hand_tracking")).unwrap();
+    let times: Vec<i64> = (0..3000).map(|i| 5_000_000_000 + i * 1_000_000).collect();
+    let poses: Vec<RigidTransform> = (0..3000)
+        .map(|i| RigidTransform::new(Quat::from_rotation_z(0.001 * i as f32), Vec3::new(0.0005 * i as f32, 0.0, 1.6)))
+        .collect();
+    let csv = write_closed_loop_trajectory(&times, &poses, "graph", Vec3::new(0.0, 0.0, -9.81));
+    std::fs::write(dir.join("trajectory/closed_loop_trajectory.csv"), csv).unwrap();
+    let mut hands = String::from(
+        "tracking_timestamp_us,left_tracking_confidence,tx_left_wrist_device,ty_left_wrist_device,tz_left_wrist_device,tx_left_palm_device,ty_left_palm_device,tz_left_palm_device,right_tracking_confidence,tx_right_wrist_device,ty_right_wrist_device,tz_right_wrist_device,tx_right_palm_device,ty_right_palm_device,tz_right_palm_device,nx_left_palm_device,ny_left_palm_device,nz_left_palm_device,nx_left_wrist_device,ny_left_wrist_device,nz_left_wrist_device,nx_right_palm_device,ny_right_palm_device,nz_right_palm_device,nx_right_wrist_device,ny_right_wrist_device,nz_right_wrist_device\n",
+    );
+    for i in 0..90 {
+        let us = 5_000_000 + i * 33_333;
+        let right_seen = !(30..60).contains(&i);
+        let right = if right_seen { "0.9,-0.2,-0.3,0.35,-0.25,-0.35,0.42" } else { "-1,0,0,0,0,0,0" };
+        let right_normals = if right_seen { "0,-1,0,0,-1,0" } else { "0,0,0,0,0,0" };
+        let _ = writeln!(hands, "{us},0.95,0.2,-0.3,0.35,0.25,-0.35,0.42,{right},0,-1,0,0,-1,0,{right_normals}");
+    }
+    std::fs::write(dir.join("hand_tracking/wrist_and_palm_poses.csv"), hands).unwrap();
+    let mut points = String::from("uid,graph_uid,px_world,py_world,pz_world,inv_dist_std,dist_std\n");
+    for i in 0..600 {
+        let (x, y) = ((i % 30) as f32 * 0.1 - 1.5, (i / 30) as f32 * 0.1 - 1.0);
+        let _ = writeln!(points, "{i},graph,{x},{y},{:.4},0.0003,0.01", 0.002 * ((i % 5) as f32 - 2.0));
+    }
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    gz.write_all(points.as_bytes()).unwrap();
+    std::fs::write(dir.join("trajectory/global_points.csv.gz"), gz.finish().unwrap()).unwrap();
+}
+
+#[test]
+fn inspect_an_mps_folder_shows_wrist_coverage_floor_and_why_1_point() {
+    let dir = scratch("mps-wearer").join("mps_wearer_vrs");
+    write_mps_wearer(&dir);
+    let o = egoexo(&["inspect", path_str(&dir)]);
+    let out = stdout(&o);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for needle in [
+        "head         3000 poses, 2.999 s, 1000.0 Hz",
+        // The hand samples end 33 ms before the head: the last frame has no left wrist.
+        "left wrist tracked on 98.9% of frames, longest gap 0.03 s",
+        "right wrist tracked on 6",
+        "wrists from  MPS wrist_and_palm_poses.csv v2 (positions and normals); orientation from the hand direction and the wrist normal",
+        "tracking     1-point (the wrists are tracked on only 99% (left) and 6",
+        "m, from semidense points (600 well-constrained points at the floor, trajectory/global_points.csv.gz)",
+    ] {
+        assert!(out.contains(needle), "missing {needle:?} in\n{out}");
+    }
+    let gap: f64 = out
+        .lines()
+        .find(|l| l.contains("right wrist tracked on"))
+        .and_then(|l| l.rsplit("longest gap ").next())
+        .and_then(|s| s.trim_end_matches(" s").parse().ok())
+        .unwrap();
+    assert!((0.95..1.1).contains(&gap), "right wrist gap {gap} s");
+    let o = egoexo(&["inspect", path_str(&dir), "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["tracking"]["points"], 1);
+    assert_eq!(v["wrist_source"]["form"], "wrist_and_palm_v2");
+    assert!(v["floor"]["height_m"].as_f64().unwrap().abs() < 0.005);
+    assert!((v["wrists"][0]["tracked_percent"].as_f64().unwrap() - 98.9).abs() < 0.1);
+}
+
 #[test]
 fn inspect_nymeria_with_side_keypoints_and_json() {
     let f = fixtures();

@@ -78,6 +78,29 @@ pub struct StreamCoverage {
     pub frames: usize,
 }
 
+/// Least fraction of the head's tracked frames on which each wrist must be tracked for
+/// [`AlignedSession::tracking_choice`] to pick the 3-point model (a wrist device that starts a
+/// moment after the glasses still counts as present).
+pub const THREE_POINT_MIN_WRIST_COVERAGE: f32 = 0.98;
+
+/// The default tracking mode of a session, and why it is 1-point although wrists exist.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TrackingChoice {
+    pub mode: TrackingMode,
+    /// Set when wrists exist but the 1-point model is chosen.
+    pub reason: Option<String>,
+}
+
+/// The longest run of `false` in `valid`, in frames.
+pub fn longest_gap_frames(valid: &[bool]) -> usize {
+    let (mut longest, mut run) = (0, 0);
+    for &v in valid {
+        run = if v { 0 } else { run + 1 };
+        longest = longest.max(run);
+    }
+    longest
+}
+
 /// A session resampled onto one timeline.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AlignedSession {
@@ -96,6 +119,9 @@ pub struct AlignedSession {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ground_truth: Option<AlignedGroundTruth>,
     pub coverage: Vec<StreamCoverage>,
+    /// The floor's height (world Y, metres), when the session knows it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub floor_y: Option<f32>,
 }
 
 impl AlignedSession {
@@ -142,13 +168,59 @@ impl AlignedSession {
                     .collect(),
             }),
             coverage: Vec::new(),
+            floor_y: self.floor_y,
         }
     }
 
-    /// The tracking mode the wearer's devices allow ([`TrackingMode::for_devices`]): 3-point
-    /// when both wrist trajectories exist.
+    /// The tracking mode to reconstruct with by default ([`AlignedSession::tracking_choice`]).
     pub fn tracking_mode(&self) -> TrackingMode {
-        TrackingMode::for_devices(self.left_wrist.is_some(), self.right_wrist.is_some())
+        self.tracking_choice().mode
+    }
+
+    /// Whether both wrist trajectories exist (3-point tracking can be asked for).
+    pub fn has_wrists(&self) -> bool {
+        self.left_wrist.is_some() && self.right_wrist.is_some()
+    }
+
+    /// Per wrist (left, right): the fraction of the head's tracked frames on which it is
+    /// tracked too; `None` for a wrist the session does not have.
+    pub fn wrist_coverage(&self) -> [Option<f32>; 2] {
+        let head: Vec<usize> = (0..self.head.valid.len()).filter(|&f| self.head.valid[f]).collect();
+        [&self.left_wrist, &self.right_wrist].map(|w| {
+            w.as_ref().map(|w| {
+                let both = head.iter().filter(|&&f| w.valid.get(f).copied().unwrap_or(false)).count();
+                both as f32 / head.len().max(1) as f32
+            })
+        })
+    }
+
+    /// The tracking mode to reconstruct with by default, and why when it is not the one the
+    /// devices suggest: 3-point when both wrists are tracked on at least
+    /// [`THREE_POINT_MIN_WRIST_COVERAGE`] of the head's frames, else 1-point. Wrists from hand
+    /// tracking come and go with the hands' visibility; the 3-point model reads them on every
+    /// frame of a window, so a session whose wrists are there only part of the time gets the
+    /// 1-point model rather than holes.
+    pub fn tracking_choice(&self) -> TrackingChoice {
+        let [left, right] = self.wrist_coverage();
+        match (left, right) {
+            (Some(l), Some(r)) if l >= THREE_POINT_MIN_WRIST_COVERAGE && r >= THREE_POINT_MIN_WRIST_COVERAGE => {
+                TrackingChoice { mode: TrackingMode::ThreePoint, reason: None }
+            }
+            (Some(l), Some(r)) => TrackingChoice {
+                mode: TrackingMode::OnePoint,
+                reason: Some(format!(
+                    "the wrists are tracked on only {:.0}% (left) and {:.0}% (right) of the head's frames; the 3-point model needs both on at least {:.0}%",
+                    l * 100.0,
+                    r * 100.0,
+                    THREE_POINT_MIN_WRIST_COVERAGE * 100.0
+                )),
+            },
+            (Some(_), None) | (None, Some(_)) => TrackingChoice {
+                mode: TrackingMode::OnePoint,
+                reason: Some("only one wrist is tracked; the 3-point model needs both".into()),
+            },
+            (None, None) => TrackingChoice { mode: TrackingMode::OnePoint, reason: None },
+        }
     }
 
     /// Whether the wearer is reconstructable at `frame` in `tracking` mode: the head is

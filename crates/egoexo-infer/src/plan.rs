@@ -34,12 +34,13 @@ impl WindowOptions {
     }
 }
 
-/// The tracking mode to reconstruct with: `requested`, else what the wearer's devices allow
-/// ([`AlignedSession::tracking_mode`]). 3-point without both wrists is an error.
+/// The tracking mode to reconstruct with: `requested`, else the session's default
+/// ([`AlignedSession::tracking_mode`]: 1-point when the wrists are tracked only part of the
+/// time). 3-point without both wrist trajectories is an error; asked for with wrists tracked
+/// part of the time, it reconstructs the frames where they are.
 pub fn resolve_tracking(aligned: &AlignedSession, requested: Option<TrackingMode>) -> Result<TrackingMode, InferError> {
-    let available = aligned.tracking_mode();
-    let tracking = requested.unwrap_or(available);
-    if tracking == TrackingMode::ThreePoint && available != TrackingMode::ThreePoint {
+    let tracking = requested.unwrap_or_else(|| aligned.tracking_mode());
+    if tracking == TrackingMode::ThreePoint && !aligned.has_wrists() {
         return Err(InferError::MissingWrists);
     }
     Ok(tracking)

@@ -518,13 +518,44 @@ pub struct SessionSummary {
     pub duration_s: f32,
     /// Wearer devices: `head`, and `left_wrist` / `right_wrist` when tracked.
     pub devices: Vec<String>,
-    /// 1 (glasses) or 3 (glasses + both wrists).
+    /// 1 (glasses) or 3 (glasses + both wrists): the model a reconstruction uses by default.
     pub tracking_points: u8,
+    /// Why the session reconstructs with the 1-point model although it has wrists.
+    #[serde(default)]
+    pub tracking_reason: Option<String>,
+    /// Per wrist the session has: where it comes from and how much of the timeline it covers.
+    #[serde(default)]
+    pub wrists: Vec<WristSummary>,
+    /// The floor's height and how it was found.
+    #[serde(default)]
+    pub floor: Option<FloorSummary>,
     pub observers: Vec<ObserverSummary>,
     /// Whether the session carries ground-truth motion.
     pub ground_truth: bool,
     /// What the import noticed (each `file: message`).
     pub warnings: Vec<String>,
+}
+
+/// One wrist of the wearer on the timeline.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WristSummary {
+    /// `left` or `right`.
+    pub side: String,
+    /// Where its poses come from (wrist devices, MPS hand tracking and its form).
+    pub source: String,
+    /// Timeline frames on which it is tracked, percent.
+    pub tracked_percent: f32,
+    /// The longest stretch without it, seconds.
+    pub longest_gap_s: f32,
+}
+
+/// The floor under the wearer.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FloorSummary {
+    /// World Y, metres.
+    pub height_m: f32,
+    /// How it was found, in words.
+    pub source: String,
 }
 
 /// Errors against ground truth, where the session has it.

@@ -43,6 +43,20 @@ impl Default for AlignOptions {
 /// Default bridging limit: 100 ms (three frames at 30 fps).
 pub const DEFAULT_MAX_GAP_NS: i64 = 100_000_000;
 
+/// The bridging limit of a wrist trajectory: `max_gap_ns`, or 1.5 of its median sample
+/// interval when that is longer. MPS hand tracking runs at the SLAM cameras' rate, 10 Hz in
+/// many recordings (samples 100.002 ms apart): consecutive tracked samples are bridged, a
+/// missed sample (a gap of two intervals) is not.
+pub fn wrist_max_gap_ns(trajectory: &Trajectory, max_gap_ns: i64) -> i64 {
+    let mut intervals: Vec<i64> = trajectory.timestamps_ns.windows(2).map(|w| w[1] - w[0]).collect();
+    if intervals.is_empty() {
+        return max_gap_ns;
+    }
+    let mid = intervals.len() / 2;
+    let (_, median, _) = intervals.select_nth_unstable(mid);
+    max_gap_ns.max(median.saturating_mul(3) / 2)
+}
+
 /// Why a session could not be aligned.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum AlignError {
@@ -137,8 +151,9 @@ pub fn align_on_timeline(
 
     let head = resample_trajectory(&session.wearer.head, &times, options.max_gap_ns);
     cover("wearer/head".into(), count(&head.valid));
-    let left_wrist = session.wearer.left_wrist.as_ref().map(|t| resample_trajectory(t, &times, options.max_gap_ns));
-    let right_wrist = session.wearer.right_wrist.as_ref().map(|t| resample_trajectory(t, &times, options.max_gap_ns));
+    let wrist = |t: &Trajectory| resample_trajectory(t, &times, wrist_max_gap_ns(t, options.max_gap_ns));
+    let left_wrist = session.wearer.left_wrist.as_ref().map(wrist);
+    let right_wrist = session.wearer.right_wrist.as_ref().map(wrist);
     if let Some(w) = &left_wrist {
         cover("wearer/left_wrist".into(), count(&w.valid));
     }
@@ -244,6 +259,7 @@ pub fn align_on_timeline(
         head_joint_in_device: session.wearer.head_joint_in_device,
         ground_truth,
         coverage,
+        floor_y: session.floor_or_estimate().map(|f| f.height_m),
     })
 }
 
@@ -325,11 +341,13 @@ mod tests {
                 head,
                 left_wrist: None,
                 right_wrist: None,
+                wrist_source: Default::default(),
                 head_joint_in_device: Vec3::new(0.0, -0.06, -0.09),
             },
             observers: Vec::new(),
             subject: SubjectInfo::default(),
             ground_truth: None,
+            floor: None,
         }
     }
 

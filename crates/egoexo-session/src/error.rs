@@ -76,8 +76,8 @@ pub enum ImportErrorKind {
     #[error("invalid .npy array: {0}")]
     Npy(String),
     /// A manifest of a schema version this build cannot read.
-    #[error("unsupported schema version {got}; this build reads version {supported}")]
-    UnsupportedVersion { got: String, supported: u32 },
+    #[error("unsupported schema version {got}; this build reads versions {oldest} to {newest}")]
+    UnsupportedVersion { got: String, oldest: u32, newest: u32 },
     /// A file names an observer other than the one it belongs to.
     #[error("observer id `{got}` does not match `{expected}`")]
     ObserverMismatch { expected: String, got: String },

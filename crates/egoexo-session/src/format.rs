@@ -3,7 +3,7 @@
 //! an example, in `docs/session-format.md`.
 //!
 //! ```text
-//! session.json                                  manifest (format "egoexo-session", version 1)
+//! session.json                                  manifest (format "egoexo-session", version 2; 1 is read)
 //! wearer/head/closed_loop_trajectory.csv        trajectories: the Aria MPS CSV layout
 //! wearer/left_wrist/closed_loop_trajectory.csv  (optional)
 //! wearer/right_wrist/closed_loop_trajectory.csv (optional)
@@ -34,12 +34,13 @@ use egoexo_core::skeleton::{NUM_BODY_JOINTS, NUM_JOINTS, SmplPose, SmplSkeleton}
 use serde_json::{Value, json};
 use thiserror::Error;
 
-use crate::aria::trajectory::{Clock, WorldUp, read_closed_loop_trajectory, write_closed_loop_trajectory};
+use crate::aria::trajectory::{Clock, read_closed_loop_trajectory, write_closed_loop_trajectory};
 use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
 use crate::json::{JsonCtx, join};
 use crate::keypoints::{read_keypoints_jsonl, write_keypoints_jsonl};
 use crate::model::{
-    ContextFeatureTrack, GroundTruth, Observer, ObserverOcclusion, Session, SubjectInfo, Trajectory, VideoRef, Wearer,
+    ContextFeatureTrack, Floor, GroundTruth, Observer, ObserverOcclusion, Session, SubjectInfo, Trajectory, VideoRef,
+    Wearer, WristSource,
 };
 use egoexo_motion_io::npz::NpzWriter;
 
@@ -50,9 +51,15 @@ use crate::vfs::{FileTree, normalize_path};
 pub const MANIFEST_FILE: &str = "session.json";
 /// The manifest's `format` value.
 pub const FORMAT_NAME: &str = "egoexo-session";
-/// The manifest version this build reads and writes.
-pub const FORMAT_VERSION: u32 = 1;
-/// The fixed `conventions` object of version 1.
+/// The manifest version this build writes. Version 2 added the optional `floor` and
+/// `wearer.wrist_source` fields; version 1 files (without them) are read too.
+pub const FORMAT_VERSION: u32 = 2;
+/// The oldest manifest version this build reads.
+pub const MIN_FORMAT_VERSION: u32 = 1;
+/// Largest accepted angle between a session trajectory's gravity and −Y, degrees (session
+/// worlds are Y-up by definition).
+pub const MAX_SESSION_GRAVITY_TILT_DEG: f32 = 1.0;
+/// The fixed `conventions` object (the same in every version).
 pub fn conventions_json() -> Value {
     json!({"world": "y_up", "device_frame": "cpf", "time": "nanoseconds", "length": "metres"})
 }
@@ -83,6 +90,10 @@ pub fn write_egoexo_files(session: &Session) -> Result<BTreeMap<String, Vec<u8>>
     put_trajectory(&mut files, head.clone(), &session.wearer.head);
     let mut wearer =
         json!({"head": head, "head_joint_in_device": f32s(&session.wearer.head_joint_in_device.to_array())});
+    if !session.wearer.wrist_source.is_devices() {
+        wearer["wrist_source"] = serde_json::to_value(&session.wearer.wrist_source)
+            .map_err(|e| WriteError::Encode { what: "wearer.wrist_source".into(), message: e.to_string() })?;
+    }
     for (key, wrist) in [("left_wrist", &session.wearer.left_wrist), ("right_wrist", &session.wearer.right_wrist)] {
         if let Some(wrist) = wrist {
             let path = format!("wearer/{key}/closed_loop_trajectory.csv");
@@ -125,6 +136,10 @@ pub fn write_egoexo_files(session: &Session) -> Result<BTreeMap<String, Vec<u8>>
         "wearer": wearer,
         "observers": observers,
     });
+    if let Some(floor) = &session.floor {
+        manifest["floor"] = serde_json::to_value(floor)
+            .map_err(|e| WriteError::Encode { what: "floor".into(), message: e.to_string() })?;
+    }
     if let Some(gt) = &session.ground_truth {
         let path = "ground_truth.npz".to_owned();
         files.insert(path.clone(), ground_truth_npz(gt, &path)?);
@@ -252,17 +267,25 @@ pub fn read_egoexo(root: &FileTree) -> Result<(Session, Vec<ImportWarning>), Imp
     }
     let version = ctx.field(&doc, "", "version")?;
     match version.as_u64() {
-        Some(v) if v == u64::from(FORMAT_VERSION) => {}
+        Some(v) if (u64::from(MIN_FORMAT_VERSION)..=u64::from(FORMAT_VERSION)).contains(&v) => {}
         Some(v) => {
             return Err(ctx.error(
                 "version",
-                ImportErrorKind::UnsupportedVersion { got: v.to_string(), supported: FORMAT_VERSION },
+                ImportErrorKind::UnsupportedVersion {
+                    got: v.to_string(),
+                    oldest: MIN_FORMAT_VERSION,
+                    newest: FORMAT_VERSION,
+                },
             ));
         }
         None => {
             return Err(ctx.error(
                 "version",
-                ImportErrorKind::UnsupportedVersion { got: crate::json::describe(version), supported: FORMAT_VERSION },
+                ImportErrorKind::UnsupportedVersion {
+                    got: crate::json::describe(version),
+                    oldest: MIN_FORMAT_VERSION,
+                    newest: FORMAT_VERSION,
+                },
             ));
         }
     }
@@ -270,7 +293,18 @@ pub fn read_egoexo(root: &FileTree) -> Result<(Session, Vec<ImportWarning>), Imp
     reader.known_keys(
         &doc,
         "",
-        &["format", "version", "name", "created_by", "conventions", "subject", "wearer", "observers", "ground_truth"],
+        &[
+            "format",
+            "version",
+            "name",
+            "created_by",
+            "conventions",
+            "subject",
+            "wearer",
+            "observers",
+            "ground_truth",
+            "floor",
+        ],
     );
     let conventions = ctx.field(&doc, "", "conventions")?;
     if *conventions != conventions_json() {
@@ -288,7 +322,23 @@ pub fn read_egoexo(root: &FileTree) -> Result<(Session, Vec<ImportWarning>), Imp
         Some(v) => Some(reader.ground_truth(v)?),
         None => None,
     };
-    Ok((Session { name, wearer, observers, subject, ground_truth }, reader.warnings))
+    let floor = match ctx.optional(&doc, "", "floor")? {
+        Some(v) => {
+            let floor: Floor = serde_json::from_value(v.clone()).map_err(|e| {
+                ctx.invalid(
+                    "floor",
+                    format!("{{\"height_m\": metres, \"source\": {{\"kind\": \"semidense_points\" | \"standing_head\" | \"ground_truth\", …}}}} ({e})"),
+                    v,
+                )
+            })?;
+            if !(floor.height_m.is_finite() && floor.height_m.abs() <= 10_000.0) {
+                return Err(ctx.invalid("floor.height_m", "a finite height within ±10000 m", &v["height_m"]));
+            }
+            Some(floor)
+        }
+        None => None,
+    };
+    Ok((Session { name, wearer, observers, subject, ground_truth, floor }, reader.warnings))
 }
 
 struct ManifestReader<'a> {
@@ -326,7 +376,16 @@ impl ManifestReader<'_> {
     fn trajectory(&self, v: &Value, path: &str) -> Result<Trajectory, ImportError> {
         let file = self.data_path(v, path)?;
         let display = self.root.display_path(&file);
-        let t = read_closed_loop_trajectory(&display, &self.root.read(&file)?, Clock::Device, WorldUp::Y)?;
+        let t = read_closed_loop_trajectory(&display, self.root.open_reader(&file)?, Clock::Device, &mut |_| {})?;
+        let g = t.gravity_world;
+        if g.normalize().dot(Vec3::NEG_Y) < MAX_SESSION_GRAVITY_TILT_DEG.to_radians().cos() {
+            return Err(ImportError::invalid(
+                display,
+                Location::LineField { line: 2, field: "gravity_x_world..gravity_z_world".into() },
+                format!("gravity along −Y (a session world is Y-up, within {MAX_SESSION_GRAVITY_TILT_DEG}°)"),
+                format!("({}, {}, {})", g.x, g.y, g.z),
+            ));
+        }
         Ok(Trajectory { timestamps_ns: t.timestamps_ns, poses: t.poses })
     }
 
@@ -369,7 +428,7 @@ impl ManifestReader<'_> {
 
     fn wearer(&mut self, v: &Value) -> Result<Wearer, ImportError> {
         let ctx = self.ctx;
-        self.known_keys(v, "wearer", &["head", "left_wrist", "right_wrist", "head_joint_in_device"]);
+        self.known_keys(v, "wearer", &["head", "left_wrist", "right_wrist", "head_joint_in_device", "wrist_source"]);
         let head = self.trajectory(ctx.field(v, "wearer", "head")?, "wearer.head")?;
         let left_wrist =
             ctx.optional(v, "wearer", "left_wrist")?.map(|w| self.trajectory(w, "wearer.left_wrist")).transpose()?;
@@ -378,7 +437,17 @@ impl ManifestReader<'_> {
         let head_joint_in_device = Vec3::from_array(
             ctx.f32_array::<3>(ctx.field(v, "wearer", "head_joint_in_device")?, "wearer.head_joint_in_device")?,
         );
-        Ok(Wearer { head, left_wrist, right_wrist, head_joint_in_device })
+        let wrist_source = match ctx.optional(v, "wearer", "wrist_source")? {
+            Some(w) => serde_json::from_value(w.clone()).map_err(|e| {
+                ctx.invalid(
+                    "wearer.wrist_source",
+                    format!("{{\"kind\": \"devices\"}} or {{\"kind\": \"hand_tracking\", \"file\", \"form\", \"orientation\"}} ({e})"),
+                    w,
+                )
+            })?,
+            None => WristSource::Devices,
+        };
+        Ok(Wearer { head, left_wrist, right_wrist, wrist_source, head_joint_in_device })
     }
 
     fn transform(&self, v: &Value, path: &str) -> Result<RigidTransform, ImportError> {

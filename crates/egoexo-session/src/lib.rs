@@ -7,7 +7,8 @@
 //!   MPS (one device or the multi-device layout); [`import::import_session`] is the entry.
 //! - [`format`](mod@format) — the native `.egoexo` format: reader and writer (`docs/session-format.md`).
 //! - [`aria`] — Aria conventions and MPS files (`closed_loop_trajectory.csv`,
-//!   `online_calibration.jsonl`, `time_sync.csv`).
+//!   `online_calibration.jsonl`, `time_sync.csv`, hand tracking, semidense points).
+//! - [`floor`] — the floor's height: from semidense points, or from the standing head.
 //! - [`live`] — a live take: frames received from the relay gathered into a session.
 //! - [`keypoints`] — exo keypoint files: JSON lines (read/write) and COCO JSON (read).
 //! - [`npz`] — checked `.npz` reading (writing is `egoexo_motion_io::npz`).
@@ -23,6 +24,7 @@
 pub mod align;
 pub mod aria;
 pub mod error;
+pub mod floor;
 pub mod format;
 pub mod import;
 mod json;

@@ -15,7 +15,7 @@ use egoexo_core::exo_keypoints::{COCO17_COUNT, Keypoint2d};
 use egoexo_core::rigid::RigidTransform;
 use egoexo_protocol::live::{ChannelInfo, DataFrame, DeviceRole, FramePayload, Stream};
 
-use crate::model::{KeypointTrack, Observer, Session, SubjectInfo, Trajectory, Wearer};
+use crate::model::{KeypointTrack, Observer, Session, SubjectInfo, Trajectory, Wearer, WristSource};
 use crate::validate::validate_session;
 use crate::{ImportError, ImportWarning};
 
@@ -209,11 +209,13 @@ impl LiveTake {
                 head,
                 left_wrist: wrist(Stream::LeftWrist),
                 right_wrist: wrist(Stream::RightWrist),
+                wrist_source: WristSource::Devices,
                 head_joint_in_device: egoexo_core::skeleton::DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE,
             },
             observers,
             subject: SubjectInfo::default(),
             ground_truth: None,
+            floor: None,
         };
         warnings.extend(validate_session(&session)?);
         Ok((session, warnings))

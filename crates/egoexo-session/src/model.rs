@@ -16,6 +16,9 @@ use egoexo_core::rigid::RigidTransform;
 use egoexo_core::skeleton::{DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE, NUM_JOINTS, SkeletonError, SmplSkeleton};
 use serde::{Deserialize, Serialize};
 
+pub use crate::aria::hand_tracking::{HandTrackingForm, WristOrientation};
+pub use crate::floor::{Floor, FloorSource};
+
 /// A recording: one wearer, zero or more observers, subject info, optional ground truth.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Session {
@@ -26,6 +29,17 @@ pub struct Session {
     pub subject: SubjectInfo,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ground_truth: Option<GroundTruth>,
+    /// The floor's height and how it was found ([`crate::floor`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub floor: Option<Floor>,
+}
+
+impl Session {
+    /// The stored floor, else the estimate from the standing head
+    /// ([`crate::floor::floor_from_standing_head`]).
+    pub fn floor_or_estimate(&self) -> Option<Floor> {
+        self.floor.clone().or_else(|| crate::floor::floor_from_standing_head(self))
+    }
 }
 
 /// A device trajectory: strictly increasing timestamps with one `T_world_device` each.
@@ -57,15 +71,63 @@ impl Trajectory {
 pub struct Wearer {
     /// Glasses (CPF frame).
     pub head: Trajectory,
-    /// Left wrist device (3-point tracking).
+    /// Left wrist (3-point tracking): `T_world_wrist` where it was tracked. A wrist device
+    /// reports it throughout; hand tracking only while the hand is seen, so its samples come
+    /// and go (untracked samples are left out; see [`WristSource`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub left_wrist: Option<Trajectory>,
-    /// Right wrist device (3-point tracking).
+    /// Right wrist, as the left.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub right_wrist: Option<Trajectory>,
+    /// Where the wrist trajectories come from.
+    #[serde(default, skip_serializing_if = "WristSource::is_devices")]
+    pub wrist_source: WristSource,
     /// SMPL head joint in the head-device frame, metres (root recovery's offset).
     #[serde(default = "default_head_joint_in_device")]
     pub head_joint_in_device: Vec3,
+}
+
+/// Where a wearer's wrist poses come from. Wrist poses are SMPL wrist-joint frames (at the
+/// rest pose the left hand points along +X, the right along −X, palms −Y), whatever the
+/// source.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum WristSource {
+    /// Wrist devices (wristbands, controllers, the simulator): measured poses.
+    #[default]
+    Devices,
+    /// MPS hand tracking of the wearer's glasses: wrists only while the hands are seen.
+    HandTracking {
+        /// The file read (as named in import messages).
+        file: String,
+        form: HandTrackingForm,
+        orientation: WristOrientation,
+    },
+}
+
+impl WristSource {
+    /// Wrist devices (the default, not written to files).
+    pub fn is_devices(&self) -> bool {
+        matches!(self, WristSource::Devices)
+    }
+
+    /// How the orientation the networks receive was obtained.
+    pub fn orientation(&self) -> WristOrientation {
+        match self {
+            WristSource::Devices => WristOrientation::Device,
+            WristSource::HandTracking { orientation, .. } => *orientation,
+        }
+    }
+
+    /// In words.
+    pub fn describe(&self) -> String {
+        match self {
+            WristSource::Devices => "wrist devices".into(),
+            WristSource::HandTracking { form, orientation, .. } => {
+                format!("{}; orientation {}", form.describe(), orientation.describe())
+            }
+        }
+    }
 }
 
 fn default_head_joint_in_device() -> Vec3 {

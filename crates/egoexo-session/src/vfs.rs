@@ -293,6 +293,36 @@ impl FileTree {
         }
     }
 
+    /// The size of a file in bytes (declared size for zip entries), if it exists.
+    pub fn size(&self, path: &str) -> Option<u64> {
+        let full = self.display_path(path);
+        match &*self.backend {
+            Backend::Memory(files) => files.get(&full).map(|b| b.len() as u64),
+            Backend::Zip { index, .. } => index.get(&full).map(|&(_, size)| size),
+            #[cfg(not(target_arch = "wasm32"))]
+            Backend::Directory { files, .. } => files.get(&full).copied(),
+        }
+    }
+
+    /// A file as a stream (relative to this view), checked against [`Limits::max_file_bytes`]:
+    /// files on disk are read as they are consumed, so a reader that keeps little holds
+    /// little; memory and zip trees hand out their bytes.
+    pub fn open_reader(&self, path: &str) -> Result<Box<dyn Read + '_>, ImportError> {
+        #[cfg(not(target_arch = "wasm32"))]
+        if let Backend::Directory { root, files } = &*self.backend {
+            let full = self.display_path(path);
+            let limit = self.limits.max_file_bytes;
+            let &size = files.get(&full).ok_or_else(|| not_found(&full))?;
+            if size > limit {
+                return Err(too_large(&full, size, limit));
+            }
+            let file = std::fs::File::open(root.join(&full))
+                .map_err(|e| ImportError::invalid(&full, Location::File, "a readable file", e.to_string()))?;
+            return Ok(Box::new(std::io::BufReader::with_capacity(1 << 16, file.take(limit))));
+        }
+        Ok(Box::new(Cursor::new(self.read(path)?)))
+    }
+
     /// Like [`FileTree::read`], as UTF-8 text.
     pub fn read_text(&self, path: &str) -> Result<Cow<'_, str>, ImportError> {
         let full = self.display_path(path);

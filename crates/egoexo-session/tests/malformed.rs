@@ -21,6 +21,8 @@ const OBS1_KP: &str = "observers/observer-1/keypoints.jsonl";
 const OBS2_CSV: &str = "observers/observer-2/slam/closed_loop_trajectory.csv";
 const OBS2_COCO: &str = "observers/observer-2/keypoints.json";
 const SMPL: &str = "body/xdata_smpl_neutral.npz";
+const HAND_V1: &str = "wearer/hand_tracking/wrist_and_palm_poses.csv";
+const HAND_V1_HEADER: &str = "tracking_timestamp_us,left_tracking_confidence,tx_left_wrist_device,ty_left_wrist_device,tz_left_wrist_device,tx_left_palm_device,ty_left_palm_device,tz_left_palm_device,right_tracking_confidence,tx_right_wrist_device,ty_right_wrist_device,tz_right_wrist_device,tx_right_palm_device,ty_right_palm_device,tz_right_palm_device";
 
 fn text(files: &Files, path: &str) -> String {
     String::from_utf8(files[path].clone()).unwrap()
@@ -265,17 +267,53 @@ fn cases() -> Vec<Case> {
             ],
         },
         Case {
-            name: "gravity not along -Z",
+            name: "gravity changes within a file",
             input: Aria(|f| {
                 edit_csv(f, WEARER_CSV, |rows| {
                     let (y, z) = (column(rows, "gravity_y_world"), column(rows, "gravity_z_world"));
-                    rows[1][y] = "-9.81".into();
-                    rows[1][z] = "0".into();
+                    rows[40][y] = "-9.81".into();
+                    rows[40][z] = "0".into();
                 })
             }),
             expected: &[
-                "line 2, field `gravity_x_world..gravity_z_world`: expected gravity along −Z of the world",
-                "got (0, -9.81, 0)",
+                "wearer/closed_loop_trajectory.csv, line 41, field `gravity_x_world..gravity_z_world`: expected the same gravity on every row ((0.000000, 0.000000, -9.810000) from the first row",
+                "got (0.000000, -9.81, 0)",
+            ],
+        },
+        Case {
+            name: "zero gravity",
+            input: Aria(|f| {
+                edit_csv(f, OBS1_CSV, |rows| {
+                    let z = column(rows, "gravity_z_world");
+                    for row in rows.iter_mut().skip(1) {
+                        row[z] = "0".into();
+                    }
+                })
+            }),
+            expected: &[
+                OBS1_CSV,
+                "line 2, field `gravity_x_world..gravity_z_world`: expected a gravity vector at least 0.1 m/s² long (its direction is the world's down), got (0.000000, 0.000000, 0)",
+            ],
+        },
+        Case {
+            name: "gravity column missing",
+            input: Aria(|f| {
+                edit_csv(f, WEARER_CSV, |rows| {
+                    let y = column(rows, "gravity_y_world");
+                    for row in rows.iter_mut() {
+                        row.remove(y);
+                    }
+                })
+            }),
+            expected: &[
+                "wearer/closed_loop_trajectory.csv, line 1: missing column `gravity_y_world`; expected the columns of Aria MPS closed_loop_trajectory.csv (the world's gravity gives its up axis)",
+            ],
+        },
+        Case {
+            name: "quality_score not a number",
+            input: Aria(|f| set_cell(f, WEARER_CSV, 7, "quality_score", "good")),
+            expected: &[
+                "wearer/closed_loop_trajectory.csv, line 9, field `quality_score`: expected a finite number, got `good`",
             ],
         },
         Case {
@@ -290,7 +328,7 @@ fn cases() -> Vec<Case> {
         Case {
             name: "absurd position",
             input: Aria(|f| set_cell(f, WEARER_CSV, 12, "tx_world_device", "1e9")),
-            expected: &["line 14, field `tx_world_device`: expected a position within ±100000 m, got 1000000000"],
+            expected: &["line 14, field `tx_world_device`: expected a position within ±100000 m, got 1e9"],
         },
         Case {
             name: "timestamp overflows nanoseconds",
@@ -304,7 +342,93 @@ fn cases() -> Vec<Case> {
                 let line3 = bytes.iter().enumerate().filter(|(_, b)| **b == b'\n').nth(1).unwrap().0 + 1;
                 bytes.splice(line3..line3 + 1, [0xff, 0xfe]);
             }),
-            expected: &["wearer/closed_loop_trajectory.csv, line 3: expected UTF-8 text"],
+            expected: &["wearer/closed_loop_trajectory.csv, line 3, field `graph_uid`: expected UTF-8 text"],
+        },
+        // ---- MPS hand tracking and semidense points (the wearer's folder) ---------------
+        Case {
+            name: "hand confidence out of range",
+            input: Aria(|f| {
+                f.insert(HAND_V1.into(), format!("{HAND_V1_HEADER}\n3600000000,0.9,0.1,-0.2,0.3,0.12,-0.25,0.35,-1,0,0,0,0,0,0\n3600033333,1.7,0.1,-0.2,0.3,0.12,-0.25,0.35,-1,0,0,0,0,0,0\n").into_bytes());
+            }),
+            expected: &[
+                "wearer/hand_tracking/wrist_and_palm_poses.csv, line 3, field `left_tracking_confidence`: expected a confidence in [0, 1], or −1 where the hand is not tracked, got 1.7",
+            ],
+        },
+        Case {
+            name: "hand tracking column missing",
+            input: Aria(|f| {
+                let header = HAND_V1_HEADER.replace(",tz_right_palm_device", "");
+                f.insert(
+                    HAND_V1.into(),
+                    format!("{header}\n3600000000,0.9,0.1,-0.2,0.3,0.12,-0.25,0.35,-1,0,0,0,0,0\n").into_bytes(),
+                );
+            }),
+            expected: &[
+                "wearer/hand_tracking/wrist_and_palm_poses.csv, line 1: missing column `tz_right_palm_device`; expected the columns of MPS wrist_and_palm_poses.csv",
+            ],
+        },
+        Case {
+            name: "hand tracking time goes back",
+            input: Aria(|f| {
+                f.insert(HAND_V1.into(), format!("{HAND_V1_HEADER}\n3600033333,0.9,0.1,-0.2,0.3,0.12,-0.25,0.35,-1,0,0,0,0,0,0\n3600000000,0.9,0.1,-0.2,0.3,0.12,-0.25,0.35,-1,0,0,0,0,0,0\n").into_bytes());
+            }),
+            expected: &[
+                "wearer/hand_tracking/wrist_and_palm_poses.csv, line 3, field `tracking_timestamp_us`: timestamp 3600000000000 ns is not after the previous one",
+            ],
+        },
+        Case {
+            name: "hand far from the glasses",
+            input: Aria(|f| {
+                f.insert(
+                    HAND_V1.into(),
+                    format!("{HAND_V1_HEADER}\n3600000000,0.9,12.0,-0.2,0.3,0.12,-0.25,0.35,-1,0,0,0,0,0,0\n")
+                        .into_bytes(),
+                );
+            }),
+            expected: &[
+                "line 2, field `tx_left_wrist_device`: expected a coordinate within ±3 m of the glasses, got 12.0",
+            ],
+        },
+        Case {
+            name: "hand_tracking_results wrist quaternion not unit",
+            input: Aria(|f| {
+                let header = "tracking_timestamp_us,left_tracking_confidence,tx_left_landmark_20_device,ty_left_landmark_20_device,tz_left_landmark_20_device,tx_left_device_wrist,ty_left_device_wrist,tz_left_device_wrist,qx_left_device_wrist,qy_left_device_wrist,qz_left_device_wrist,qw_left_device_wrist,right_tracking_confidence,tx_right_landmark_20_device,ty_right_landmark_20_device,tz_right_landmark_20_device,tx_right_device_wrist,ty_right_device_wrist,tz_right_device_wrist,qx_right_device_wrist,qy_right_device_wrist,qz_right_device_wrist,qw_right_device_wrist";
+                f.insert(
+                    "wearer/hand_tracking/hand_tracking_results.csv".into(),
+                    format!("{header}\n3600000000,-1,0,0,0,0,0,0,0,0,0,1,0.8,0.1,-0.2,0.3,0.12,-0.25,0.35,0,0,0,2\n")
+                        .into_bytes(),
+                );
+            }),
+            expected: &[
+                "wearer/hand_tracking/hand_tracking_results.csv, line 2, field `qx_right_device_wrist..qw_right_device_wrist`: quaternion has norm 2",
+            ],
+        },
+        Case {
+            name: "semidense points not gzip",
+            input: Aria(|f| {
+                f.insert("wearer/global_points.csv.gz".into(), b"uid,graph_uid,px_world\n".to_vec());
+            }),
+            expected: &["wearer/global_points.csv.gz", "expected a gzip-compressed CSV file"],
+        },
+        Case {
+            name: "semidense column missing",
+            input: Aria(|f| {
+                f.insert(
+                    "wearer/global_points.csv".into(),
+                    b"uid,graph_uid,px_world,py_world,pz_world,inv_dist_std\n1,g,0,0,0,0.0001\n".to_vec(),
+                );
+            }),
+            expected: &["wearer/global_points.csv, line 1: missing column `dist_std`"],
+        },
+        Case {
+            name: "semidense coordinate not a number",
+            input: Aria(|f| {
+                f.insert(
+                    "wearer/global_points.csv".into(),
+                    b"uid,graph_uid,px_world,py_world,pz_world,inv_dist_std,dist_std\n1,g,0,0,0,0.0001,0.01\n2,g,0,zero,0,0.0001,0.01\n".to_vec(),
+                );
+            }),
+            expected: &["wearer/global_points.csv, line 3, field `py_world`: expected a finite number, got `zero`"],
         },
         // ---- online_calibration.jsonl -------------------------------------------------
         Case {
@@ -647,8 +771,10 @@ fn cases() -> Vec<Case> {
         // ---- .egoexo manifest ---------------------------------------------------------
         Case {
             name: "unknown schema version",
-            input: Egoexo(|f| edit_json(f, "session.json", |v| v["version"] = 2.into())),
-            expected: &["session.json, field `version`: unsupported schema version 2; this build reads version 1"],
+            input: Egoexo(|f| edit_json(f, "session.json", |v| v["version"] = 3.into())),
+            expected: &[
+                "session.json, field `version`: unsupported schema version 3; this build reads versions 1 to 2",
+            ],
         },
         Case {
             name: "version as a string",
@@ -809,6 +935,20 @@ fn cases() -> Vec<Case> {
             name: "SMPL translation NaN",
             input: Nymeria(|f| edit_smpl(f, |a| f64s(a, "transl").1[3 * 7 + 1] = f64::NAN)),
             expected: &["body/xdata_smpl_neutral.npz, field `transl[7, 1]`: expected a finite number, got NaN"],
+        },
+        Case {
+            name: "SMPL fit upside down (another up axis)",
+            input: Nymeria(|f| {
+                edit_smpl(f, |a| {
+                    for (i, v) in f64s(a, "global_orient").1.iter_mut().enumerate() {
+                        *v = if i % 3 == 0 { std::f64::consts::PI } else { 0.0 };
+                    }
+                })
+            }),
+            expected: &[
+                "body/xdata_smpl_neutral.npz, field `global_orient`: expected a Z-up SMPL fit (Nymeria's Aria world)",
+                "got the head above the pelvis on 0% of the frames — is this fit Y-up or otherwise rotated?",
+            ],
         },
         Case {
             name: "SMPL npz is not a zip",

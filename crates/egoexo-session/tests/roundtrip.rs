@@ -120,8 +120,21 @@ fn session() -> impl Strategy<Value = Session> {
                 rest_joints: joints.then(|| SmplSkeleton::mean_shape().scaled(1.05).rest_joints().to_owned()),
             });
     let gt = prop::option::of((prop::collection::vec(smpl_pose(), 1..12), 10.0f32..120.0, any::<u16>()));
-    (trajectory(START), wrists, observers, subject, gt, "[a-z][a-z0-9_-]{0,12}").prop_map(
-        |(head, wrists, observers, subject, gt, name)| {
+    let floor = prop::option::of((-3.0f32..3.0, 0u8..3, 1u64..100_000, 1.4f32..2.0));
+    (trajectory(START), wrists, observers, subject, gt, "[a-z][a-z0-9_-]{0,12}", floor, any::<bool>()).prop_map(
+        |(head, wrists, observers, subject, gt, name, floor, hand_tracked)| {
+            let floor = floor.map(|(height_m, kind, points, stature_m)| Floor {
+                height_m,
+                source: match kind {
+                    0 => FloorSource::SemidensePoints { file: "wearer/slam/global_points.csv.gz".into(), points },
+                    1 => FloorSource::StandingHead {
+                        standing_head_m: height_m + 1.6,
+                        stature_m,
+                        stature_known: points % 2 == 0,
+                    },
+                    _ => FloorSource::GroundTruth,
+                },
+            });
             let ground_truth = gt.map(|(poses, fps, mask)| {
                 let n = poses.len();
                 let motion =
@@ -138,12 +151,28 @@ fn session() -> impl Strategy<Value = Session> {
                 Some((l, r)) => (Some(l), Some(r)),
                 None => (None, None),
             };
+            let wrist_source = if hand_tracked && left_wrist.is_some() {
+                WristSource::HandTracking {
+                    file: "wearer/hand_tracking/wrist_and_palm_poses.csv".into(),
+                    form: HandTrackingForm::WristAndPalmV2,
+                    orientation: WristOrientation::FromNormals,
+                }
+            } else {
+                WristSource::Devices
+            };
             Session {
                 name,
-                wearer: Wearer { head, left_wrist, right_wrist, head_joint_in_device: Vec3::new(0.01, -0.06, -0.09) },
+                wearer: Wearer {
+                    head,
+                    left_wrist,
+                    right_wrist,
+                    wrist_source,
+                    head_joint_in_device: Vec3::new(0.01, -0.06, -0.09),
+                },
                 observers,
                 subject,
                 ground_truth,
+                floor,
             }
         },
     )

@@ -59,7 +59,15 @@ fn the_schema_rejects_broken_manifests() {
     let example = doc_block("json example");
     type Edit = Box<dyn Fn(&mut Value)>;
     let broken: Vec<(&str, Edit)> = vec![
-        ("version 2", Box::new(|m| m["version"] = 2.into())),
+        ("version 3", Box::new(|m| m["version"] = 3.into())),
+        ("floor without a source", Box::new(|m| m["floor"] = serde_json::json!({"height_m": 0.0}))),
+        ("an unknown floor source", Box::new(|m| m["floor"]["source"] = serde_json::json!({"kind": "guess"}))),
+        (
+            "an unknown hand tracking form",
+            Box::new(|m| {
+                m["wearer"]["wrist_source"] = serde_json::json!({"kind": "hand_tracking", "file": "x", "form": "v9", "orientation": "from_normals"})
+            }),
+        ),
         (
             "missing wearer",
             Box::new(|m| {

@@ -7,7 +7,8 @@ use egoexo_core::motion::SmplMotion;
 use egoexo_core::rigid::RigidTransform;
 use egoexo_core::skeleton::{DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE, SmplJoint, SmplSkeleton};
 use egoexo_session::model::{
-    GroundTruth, KeypointTrack, Observer, ObserverOcclusion, Session, SubjectInfo, Trajectory, Wearer,
+    Floor, FloorSource, GroundTruth, KeypointTrack, Observer, ObserverOcclusion, Session, SubjectInfo, Trajectory,
+    Wearer, WristSource,
 };
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -109,6 +110,7 @@ pub fn simulate(
         head: Trajectory { timestamps_ns: timestamps.clone(), poses: head },
         left_wrist,
         right_wrist,
+        wrist_source: WristSource::Devices,
         head_joint_in_device,
     };
 
@@ -190,6 +192,9 @@ pub fn simulate(
             rest_joints: Some(*skeleton.rest_joints()),
         },
         ground_truth: Some(GroundTruth { motion: motion.clone(), occlusion }),
+        // The simulator's own floor (its observers walk on it): the feet's lowest joints
+        // minus their height above the soles.
+        floor: Some(Floor { height_m: floor_y, source: FloorSource::GroundTruth }),
     };
     Ok(SimulatedSession {
         session,

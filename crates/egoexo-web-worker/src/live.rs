@@ -15,6 +15,7 @@
 use std::ops::Range;
 
 use egoexo_core::aligned::Timeline;
+use egoexo_core::ego_features::TrackingMode;
 use egoexo_infer::windows::WINDOW;
 use egoexo_infer::{Engine, InferError, Method, ReconstructOptions};
 use egoexo_protocol::live::{DataFrame, RelayMessage};
@@ -175,7 +176,15 @@ impl LiveReconstructor {
         // which was trained without observers.
         let has_exo = aligned.observers.iter().any(|o| o.keypoints[index].iter().any(Option::is_some));
         let method = if has_exo { Method::EgoExo } else { Method::EgoOnly };
-        let options = ReconstructOptions { method, stride: WINDOW, ..ReconstructOptions::default() };
+        // 3-point while both wrist devices are tracked at the frame shown. (The session-wide
+        // rule, `AlignedSession::tracking_choice`, would see a window's edges — wrists arriving
+        // a sample after the head — as wrists that come and go.)
+        let wrists_now = [&aligned.left_wrist, &aligned.right_wrist]
+            .iter()
+            .all(|w| w.as_ref().is_some_and(|w| w.valid.get(index).copied().unwrap_or(false)));
+        let tracking = if wrists_now { TrackingMode::ThreePoint } else { TrackingMode::OnePoint };
+        let options =
+            ReconstructOptions { method, tracking: Some(tracking), stride: WINDOW, ..ReconstructOptions::default() };
         let recon = engine.reconstruct(&aligned, &options, &mut |_| true)?;
         // The scene of the one frame shown (its rays only), on the window's floor (the lowest
         // foot over the window: steady while the feet lift).

@@ -90,7 +90,7 @@ pub fn build_scene(aligned: &AlignedSession, recon: &Reconstruction, ego_only: O
             rays,
         });
     }
-    scene.floor_y = floor_y(&recon.joints[..frames], &recon.valid);
+    scene.floor_y = aligned.floor_y.unwrap_or_else(|| floor_y(&recon.joints[..frames], &recon.valid));
     scene
 }
 

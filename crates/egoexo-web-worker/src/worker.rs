@@ -18,8 +18,8 @@ use egoexo_infer::{
 };
 use egoexo_motion_io::{ExportError, Format};
 use egoexo_protocol::worker::{
-    self as protocol, Accuracy, ErrorKind, ExportFormat, JobStage, ModelFileRef, ModelSetSummary, ModelsSummary,
-    ObserverSummary, ReconstructionSummary, SessionSummary,
+    self as protocol, Accuracy, ErrorKind, ExportFormat, FloorSummary, JobStage, ModelFileRef, ModelSetSummary,
+    ModelsSummary, ObserverSummary, ReconstructionSummary, SessionSummary, WristSummary,
 };
 use egoexo_session::align::DEFAULT_FPS;
 use egoexo_session::format::write_egoexo_zip;
@@ -490,6 +490,7 @@ fn session_summary(imported: &Imported, aligned: &AlignedSession) -> SessionSumm
         }
     }
     let timeline = &aligned.timeline;
+    let choice = aligned.tracking_choice();
     SessionSummary {
         name: aligned.name.clone(),
         source: imported.source.describe().to_string(),
@@ -497,11 +498,31 @@ fn session_summary(imported: &Imported, aligned: &AlignedSession) -> SessionSumm
         fps: timeline.fps,
         duration_s: timeline.frames as f32 / timeline.fps,
         devices,
-        tracking_points: aligned.tracking_mode().points(),
+        tracking_points: choice.mode.points(),
+        tracking_reason: choice.reason,
+        wrists: wrist_summaries(session, aligned),
+        floor: session.floor_or_estimate().map(|f| FloorSummary { height_m: f.height_m, source: f.source.describe() }),
         observers,
         ground_truth: aligned.ground_truth.is_some(),
         warnings,
     }
+}
+
+/// Per wrist: source and coverage of the timeline (what `egoexo inspect` prints too).
+fn wrist_summaries(session: &egoexo_session::Session, aligned: &AlignedSession) -> Vec<WristSummary> {
+    [("left", &aligned.left_wrist), ("right", &aligned.right_wrist)]
+        .into_iter()
+        .filter_map(|(side, w)| {
+            let w = w.as_ref()?;
+            let frames = w.valid.len().max(1);
+            Some(WristSummary {
+                side: side.into(),
+                source: session.wearer.wrist_source.describe(),
+                tracked_percent: w.valid.iter().filter(|&&v| v).count() as f32 * 100.0 / frames as f32,
+                longest_gap_s: egoexo_core::aligned::longest_gap_frames(&w.valid) as f32 / aligned.timeline.fps,
+            })
+        })
+        .collect()
 }
 
 fn reconstruction_summary(

@@ -4,7 +4,7 @@
 use std::fmt::Write as _;
 
 use anyhow::{Context, Result};
-use egoexo_core::aligned::AlignedSession;
+use egoexo_core::aligned::{AlignedSession, longest_gap_frames};
 use egoexo_core::camera::Projection;
 use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
 use egoexo_session::align::{AlignOptions, align};
@@ -81,6 +81,37 @@ fn camera_line(camera: &egoexo_core::camera::CameraCalibration) -> String {
     format!("{model} {}×{}{radius}", camera.width, camera.height)
 }
 
+/// One wrist's coverage of the timeline.
+struct WristCoverage {
+    side: &'static str,
+    percent: f64,
+    longest_gap_s: f64,
+}
+
+fn wrist_coverage(aligned: &AlignedSession) -> Vec<WristCoverage> {
+    [("left", &aligned.left_wrist), ("right", &aligned.right_wrist)]
+        .into_iter()
+        .filter_map(|(side, w)| {
+            let w = w.as_ref()?;
+            Some(WristCoverage {
+                side,
+                percent: 100.0 * w.valid.iter().filter(|&&v| v).count() as f64 / w.valid.len().max(1) as f64,
+                longest_gap_s: longest_gap_frames(&w.valid) as f64 / f64::from(aligned.timeline.fps),
+            })
+        })
+        .collect()
+}
+
+fn floor_line(session: &Session) -> String {
+    match (&session.floor, session.floor_or_estimate()) {
+        (Some(f), _) => format!("{:.3} m, from {}", f.height_m + 0.0, f.source.describe()),
+        (None, Some(f)) => {
+            format!("{:.3} m, from {} (estimated: the file stores none)", f.height_m + 0.0, f.source.describe())
+        }
+        (None, None) => "unknown".into(),
+    }
+}
+
 fn subject_line(session: &Session) -> String {
     let s = &session.subject;
     let mut parts = Vec::new();
@@ -137,7 +168,26 @@ fn summary_text(args: &Args, imported: &Imported, aligned: &AlignedSession, prob
             let _ = writeln!(out, "  {name:<12} {}", trajectory_line(w, origin));
         }
     }
+    for c in wrist_coverage(aligned) {
+        let _ = writeln!(
+            out,
+            "  {:<12} {} wrist tracked on {:.1}% of frames, longest gap {:.2} s",
+            "", c.side, c.percent, c.longest_gap_s
+        );
+    }
+    if s.wearer.left_wrist.is_some() || s.wearer.right_wrist.is_some() {
+        let _ = writeln!(out, "  {:<12} {}", "wrists from", s.wearer.wrist_source.describe());
+    }
+    let choice = aligned.tracking_choice();
+    let _ = writeln!(
+        out,
+        "  {:<12} {}-point{}",
+        "tracking",
+        choice.mode.points(),
+        choice.reason.as_ref().map_or(String::new(), |r| format!(" ({r})"))
+    );
     let _ = writeln!(out, "  {:<12} {}", "subject", subject_line(s));
+    let _ = writeln!(out, "  {:<12} {}", "floor", floor_line(s));
     let _ = writeln!(out, "\nObservers ({})", s.observers.len());
     for o in &s.observers {
         let _ = writeln!(out, "  {:<12} {}", o.id, trajectory_line(&o.head, origin));
@@ -246,6 +296,12 @@ fn summary_json(imported: &Imported, aligned: &AlignedSession, problems: &[Strin
             "left_wrist": s.wearer.left_wrist.as_ref().map(|w| stream(&w.timestamps_ns)),
             "right_wrist": s.wearer.right_wrist.as_ref().map(|w| stream(&w.timestamps_ns)),
         },
+        "wrists": wrist_coverage(aligned).iter().map(|c| json!({
+            "side": c.side, "tracked_percent": c.percent, "longest_gap_s": c.longest_gap_s,
+        })).collect::<Vec<_>>(),
+        "wrist_source": s.wearer.wrist_source,
+        "tracking": {"points": aligned.tracking_choice().mode.points(), "reason": aligned.tracking_choice().reason},
+        "floor": s.floor_or_estimate().map(|f| json!({"height_m": f.height_m, "source": f.source.describe(), "stored": s.floor.is_some()})),
         "subject": subject_line(s),
         "observers": s.observers.iter().map(|o| json!({
             "id": o.id,

@@ -4,8 +4,11 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use egoexo_session::aria::trajectory::Clock;
-use egoexo_session::import::{ImportOptions, Imported, KeypointFile, import_path};
+use std::sync::{Arc, Mutex};
+
+use egoexo_session::import::{ImportOptions, ImportProgress, Imported, KeypointFile, import_path};
 use egoexo_session::keypoints::CocoTiming;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 /// Which MPS timestamp column puts the devices on one clock.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -68,7 +71,43 @@ impl ImportArgs {
             },
             coco: CocoTiming { fps: self.coco_fps, start_ns: self.coco_start_ns },
             keypoint_files,
+            progress: Some(progress_bar()),
         };
         Ok(import_path(path, &options)?)
     }
+}
+
+/// Files at least this big get a progress bar while they are read.
+const PROGRESS_MIN_BYTES: u64 = 16 << 20;
+
+/// A progress bar on stderr for the big files of an import (an hour of 1 kHz trajectory is
+/// ~0.8 GB); hidden when stderr is not a terminal.
+fn progress_bar() -> ImportProgress {
+    let bar = ProgressBar::hidden();
+    let current = Mutex::new(String::new());
+    ImportProgress(Arc::new(move |file: &str, done: u64, total: u64| {
+        let Ok(mut current) = current.lock() else { return };
+        if *current != file {
+            *current = file.to_owned();
+            bar.finish_and_clear();
+            if total >= PROGRESS_MIN_BYTES {
+                bar.set_draw_target(ProgressDrawTarget::stderr());
+                bar.set_style(
+                    ProgressStyle::with_template(
+                        "{msg} {wide_bar} {bytes}/{total_bytes} ({binary_bytes_per_sec}, {eta})",
+                    )
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+                );
+                bar.set_message(format!("reading {file}"));
+                bar.reset();
+                bar.set_length(total);
+            } else {
+                bar.set_draw_target(ProgressDrawTarget::hidden());
+            }
+        }
+        bar.set_position(done);
+        if total > 0 && done >= total {
+            bar.finish_and_clear();
+        }
+    }))
 }

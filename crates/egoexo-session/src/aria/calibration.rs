@@ -38,6 +38,9 @@ pub const MAX_IMAGE_SIDE_PX: u64 = 16_384;
 #[derive(Clone, Debug, PartialEq)]
 pub struct AriaCamera {
     pub label: String,
+    /// Whether the image size came from the record's `ImageSizes` (MPS ≥ 1.1) rather than the
+    /// sensor's full resolution.
+    pub size_from_image_sizes: bool,
     /// Intrinsics, image size and `T_device_camera` (Aria device frame).
     pub calibration: CameraCalibration,
 }
@@ -241,7 +244,7 @@ fn read_camera(
     let calibration = CameraCalibration::new(projection, width, height, t_device_camera)
         .map_err(|e| ImportError::invalid(ctx.file, ctx.at(path), "a valid camera", e.to_string()))?
         .with_valid_radius(RGB_VALID_RADIUS_FULL_RES_PX * width as f32 / RGB_FULL_RES_PX as f32);
-    Ok(Some(AriaCamera { label, calibration }))
+    Ok(Some(AriaCamera { label, size_from_image_sizes: size.is_some(), calibration }))
 }
 
 /// `{Translation: [x, y, z], UnitQuaternion: [w, [x, y, z]]}`.

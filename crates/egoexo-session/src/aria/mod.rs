@@ -6,7 +6,9 @@
 //! - **World.** MPS worlds are gravity-aligned with gravity along −Z (Z up). The session world
 //!   is Y up. [`t_session_world_aria_world`] is the rotation of −90° about X:
 //!   `(x, y, z)_aria ↦ (x, z, −y)_session` — Aria's up (+Z) becomes +Y, Aria's +Y becomes −Z,
-//!   X is kept. It is a proper rotation, so handedness is preserved.
+//!   X is kept. It is a proper rotation, so handedness is preserved. A file whose gravity is
+//!   not −Z (a Y-up world, or a slightly tilted one) gets [`t_session_world_from_gravity`]:
+//!   the same rotation followed by the shortest rotation taking its gravity onto −Y.
 //! - **Device frame.** An Aria device pose `T_world_device` refers to the device frame, which
 //!   is the left SLAM camera's frame on Aria Gen 1. Head devices in a session use the central
 //!   pupil frame (CPF: +X left, +Y up, +Z forward): `T_world_cpf = T_world_device · T_device_cpf`.
@@ -19,6 +21,8 @@
 //!   onto the common clock it names.
 
 pub mod calibration;
+pub mod hand_tracking;
+pub mod semidense;
 pub mod time_sync;
 pub mod trajectory;
 
@@ -30,6 +34,38 @@ use egoexo_core::skeleton::SmplPose;
 /// rotation of −90° about X, `(x, y, z) ↦ (x, z, −y)`.
 pub fn t_session_world_aria_world() -> RigidTransform {
     RigidTransform::from_rotation(Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2))
+}
+
+/// `T_session_file`: maps points of a file's world whose gravity is `gravity_world` into the
+/// session's Y-up world. It is [`t_session_world_aria_world`] followed by the shortest rotation
+/// that takes the (so rotated) gravity onto −Y, so an MPS file (gravity −Z) gets exactly the
+/// MPS rotation and a Y-up file (gravity −Y) the identity. `gravity_world` must be non-zero.
+pub fn t_session_world_from_gravity(gravity_world: Vec3) -> RigidTransform {
+    let aria = t_session_world_aria_world();
+    let down = aria.rotation * gravity_world.normalize();
+    // `from_rotation_arc` is ill-defined for opposite vectors: gravity along +Y after the
+    // MPS rotation (an upside-down world) turns half a turn about X.
+    let fix = if down.dot(Vec3::NEG_Y) < -0.999_999 {
+        Quat::from_rotation_x(std::f32::consts::PI)
+    } else {
+        Quat::from_rotation_arc(down, Vec3::NEG_Y)
+    };
+    RigidTransform::from_rotation((fix * aria.rotation).normalize())
+}
+
+/// A device pose in a file's world → the session pose in the Y-up world, with
+/// `t_session_file` from [`t_session_world_from_gravity`]: with `Some(T_device_cpf)` the
+/// result is `T_world_cpf` (head devices), with `None` the device frame is kept.
+pub fn session_pose_from_file(
+    t_session_file: &RigidTransform,
+    t_file_device: &RigidTransform,
+    t_device_cpf: Option<&RigidTransform>,
+) -> RigidTransform {
+    let t_session_device = *t_session_file * *t_file_device;
+    match t_device_cpf {
+        Some(t_device_cpf) => t_session_device * *t_device_cpf,
+        None => t_session_device,
+    }
 }
 
 /// Aria Gen 1 frame sizes (`DeviceClassInfo.BuildVersion` in a device calibration).
@@ -145,6 +181,26 @@ mod tests {
         assert!(r.transform_vector(Vec3::X).abs_diff_eq(Vec3::X, 1e-6));
         // Gravity (−Z in Aria) points down (−Y) in the session.
         assert!(r.transform_vector(Vec3::new(0.0, 0.0, -9.81)).abs_diff_eq(Vec3::new(0.0, -9.81, 0.0), 1e-5));
+    }
+
+    #[test]
+    fn gravity_gives_the_up_axis() {
+        let mps = t_session_world_from_gravity(Vec3::new(0.0, 0.0, -9.81));
+        assert!(mps.rotation.abs_diff_eq(t_session_world_aria_world().rotation, 1e-6), "MPS worlds as before");
+        let y_up = t_session_world_from_gravity(Vec3::new(0.0, -9.81, 0.0));
+        assert!(y_up.rotation.abs_diff_eq(Quat::IDENTITY, 1e-6), "a Y-up world is kept: {:?}", y_up.rotation);
+        for g in [
+            Vec3::new(0.0, 9.81, 0.0),
+            Vec3::new(0.0, 0.0, 9.81),
+            Vec3::new(-9.81, 0.0, 0.0),
+            Vec3::new(0.3, -0.2, -9.7),
+            Vec3::new(0.0, 0.0, -0.5),
+        ] {
+            let r = t_session_world_from_gravity(g);
+            let down = r.transform_vector(g.normalize());
+            assert!(down.abs_diff_eq(Vec3::NEG_Y, 1e-5), "{g} → {down}");
+            assert!((r.rotation_matrix().determinant() - 1.0).abs() < 1e-5);
+        }
     }
 
     #[test]

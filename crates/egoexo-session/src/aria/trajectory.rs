@@ -4,10 +4,14 @@
 //! ty_world_device, tz_world_device, qx_world_device, qy_world_device, qz_world_device,
 //! qw_world_device, device_linear_velocity_{x,y,z}_device, angular_velocity_{x,y,z}_device,
 //! gravity_{x,y,z}_world, quality_score`; extra columns are ignored, columns are found by
-//! name. The reader needs the timestamp of the chosen [`Clock`] and the pose columns; when
-//! `gravity_*_world` is present it must point down the file's world (−Z for MPS, within
-//! [`MAX_GRAVITY_TILT_DEG`]), and `graph_uid` must not change within a file (poses of
-//! different graphs do not share a world frame).
+//! name. The reader needs the timestamp of the chosen [`Clock`], the pose columns and
+//! `gravity_*_world`: MPS worlds are gravity-aligned with gravity along −Z, but other Aria
+//! tooling writes this layout in Y-up worlds (Aria Digital Twin: gravity (0, −9.81, 0)), so the
+//! file's gravity, not an assumption, says which way is down. It must be present, non-zero and
+//! the same on every row; `graph_uid` must not change within a file (poses of different graphs
+//! do not share a world frame). Runs of rows with `quality_score` below [`LOW_QUALITY_SCORE`]
+//! are reported (SLAM starts with such a stretch), not dropped. The reader streams: an hour at
+//! 1 kHz (3.6 M rows) costs the poses it keeps, not the file.
 //!
 //! `.egoexo` sessions store trajectories in this layout too (in session conventions: Y-up
 //! world, CPF device frame, see `docs/session-format.md`) with one extra column,
@@ -34,35 +38,18 @@ pub enum Clock {
     Utc,
 }
 
-/// Which axis of the file's world is up (gravity points the other way).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum WorldUp {
-    /// Aria MPS worlds: +Z up.
-    Z,
-    /// Session (`.egoexo`) worlds: +Y up.
-    Y,
-}
-
-impl WorldUp {
-    fn index(self) -> usize {
-        match self {
-            WorldUp::Z => 2,
-            WorldUp::Y => 1,
-        }
-    }
-
-    fn name(self) -> &'static str {
-        match self {
-            WorldUp::Z => "−Z",
-            WorldUp::Y => "−Y",
-        }
-    }
-}
-
 /// Tolerance on `|q|` before normalising a stored quaternion.
 pub const QUATERNION_NORM_TOLERANCE: f64 = 1e-3;
-/// Largest accepted angle between `gravity_world` and −Z, degrees.
-pub const MAX_GRAVITY_TILT_DEG: f64 = 10.0;
+/// Largest accepted change of `gravity_*_world` within one file, as a fraction of its length
+/// (MPS writes one gravity vector per world; a change means two worlds were concatenated).
+pub const MAX_GRAVITY_CHANGE: f64 = 1e-3;
+/// Shortest accepted `|gravity_world|`, m/s² (a zero vector has no direction).
+pub const MIN_GRAVITY_NORM: f64 = 0.1;
+/// `quality_score` below this marks a pose as low quality (MPS scores lie in [0, 1]; a
+/// closed-loop trajectory starts with a stretch of low scores while SLAM initialises).
+pub const LOW_QUALITY_SCORE: f64 = 0.5;
+/// Rows between two progress reports of [`read_closed_loop_trajectory`].
+pub const PROGRESS_EVERY_ROWS: usize = 1 << 16;
 /// Largest accepted |coordinate| of a device position, metres (anything beyond is not a
 /// room-scale or building-scale recording and indicates a unit or column mix-up).
 pub const MAX_ABS_POSITION_M: f64 = 100_000.0;
@@ -101,30 +88,52 @@ const POSE_COLUMNS: [&str; 7] = [
     "qw_world_device",
 ];
 
-/// A trajectory as stored in a file: strictly increasing timestamps (ns) and `T_world_device`.
+/// A trajectory as stored in a file: strictly increasing timestamps (ns) and `T_world_device`
+/// of the file's world, plus what the file says about that world and the poses' quality.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct CsvTrajectory {
     pub timestamps_ns: Vec<i64>,
     pub poses: Vec<RigidTransform>,
+    /// `gravity_{x,y,z}_world`, m/s² in the file's world (the same on every row).
+    pub gravity_world: Vec3,
+    /// Runs of consecutive rows whose `quality_score` is below [`LOW_QUALITY_SCORE`].
+    pub low_quality: Vec<QualitySpan>,
 }
 
-/// Reads a `closed_loop_trajectory.csv` whose world has `up` as its up axis. `file` names it
-/// in errors.
+/// Consecutive low-quality rows of a trajectory.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct QualitySpan {
+    /// Timestamps of the first and last row of the run, ns (the file's clock).
+    pub start_ns: i64,
+    pub end_ns: i64,
+    pub rows: usize,
+}
+
+/// Reads a `closed_loop_trajectory.csv` from `reader`, streaming (memory grows with the poses
+/// kept, not with the file). `file` names it in errors; `progress` is called with the bytes
+/// read so far every [`PROGRESS_EVERY_ROWS`] rows and once at the end.
+///
+/// Gravity is required: every row's `gravity_*_world` must be finite, at least
+/// [`MIN_GRAVITY_NORM`] long, and equal to the first row's within [`MAX_GRAVITY_CHANGE`]. Its
+/// direction is the file's "down" (see [`crate::aria::t_session_world_from_gravity`]).
 pub fn read_closed_loop_trajectory(
     file: &str,
-    bytes: &[u8],
+    reader: impl std::io::Read,
     clock: Clock,
-    up: WorldUp,
+    progress: &mut dyn FnMut(u64),
 ) -> Result<CsvTrajectory, ImportError> {
-    if bytes.iter().all(u8::is_ascii_whitespace) {
+    let mut reader = csv::ReaderBuilder::new().has_headers(true).trim(csv::Trim::All).from_reader(reader);
+    let headers = match reader.headers() {
+        Ok(h) => h.clone(),
+        Err(e) => return Err(csv_error(file, &e)),
+    };
+    if headers.iter().all(str::is_empty) {
         return Err(ImportError::new(
             file,
             Location::File,
             ImportErrorKind::Empty { expected: "a closed_loop_trajectory.csv header and poses".into() },
         ));
     }
-    let mut reader = csv::ReaderBuilder::new().has_headers(true).trim(csv::Trim::All).from_reader(bytes);
-    let headers = reader.headers().map_err(|e| csv_error(file, &e))?.clone();
     let find = |name: &str| headers.iter().position(|h| h == name);
     let found = || {
         let mut s = headers.iter().take(24).map(|h| quote(h, 40)).collect::<Vec<_>>().join(", ");
@@ -133,51 +142,58 @@ pub fn read_closed_loop_trajectory(
         }
         s
     };
-    let required = |name: &str| {
+    let required = |name: &str, expected: &str| {
         find(name).ok_or_else(|| {
             ImportError::new(
                 file,
                 Location::Line(1),
-                ImportErrorKind::MissingColumn {
-                    column: name.into(),
-                    expected: "of Aria MPS closed_loop_trajectory.csv".into(),
-                    found: found(),
-                },
+                ImportErrorKind::MissingColumn { column: name.into(), expected: expected.into(), found: found() },
             )
         })
     };
+    const OF_MPS: &str = "of Aria MPS closed_loop_trajectory.csv";
     let (time_column, time_scale): (usize, i64) = match clock {
         Clock::Device => match find("tracking_timestamp_ns") {
             Some(c) => (c, 1),
-            None => (required("tracking_timestamp_us")?, 1000),
+            None => (required("tracking_timestamp_us", OF_MPS)?, 1000),
         },
-        Clock::Utc => (required("utc_timestamp_ns")?, 1),
+        Clock::Utc => (required("utc_timestamp_ns", OF_MPS)?, 1),
     };
     let time_name = headers.get(time_column).unwrap_or_default().to_owned();
     let mut pose_columns = [0usize; 7];
     for (slot, name) in pose_columns.iter_mut().zip(POSE_COLUMNS) {
-        *slot = required(name)?;
+        *slot = required(name, OF_MPS)?;
     }
-    let gravity_columns = match (find("gravity_x_world"), find("gravity_y_world"), find("gravity_z_world")) {
-        (Some(x), Some(y), Some(z)) => Some([x, y, z]),
-        _ => None,
-    };
+    const GRAVITY: &str = "of Aria MPS closed_loop_trajectory.csv (the world's gravity gives its up axis)";
+    let gravity_columns = [
+        required("gravity_x_world", GRAVITY)?,
+        required("gravity_y_world", GRAVITY)?,
+        required("gravity_z_world", GRAVITY)?,
+    ];
     let graph_column = find("graph_uid");
+    let quality_column = find("quality_score");
 
     let mut out = CsvTrajectory::default();
     let mut graph: Option<String> = None;
-    let mut record = csv::StringRecord::new();
+    // The first row's gravity fields as written: rows that repeat them are not parsed again.
+    let mut gravity_text: Option<[String; 3]> = None;
+    let mut first_gravity = egoexo_core::glam::DVec3::ZERO;
+    let mut low_run: Option<QualitySpan> = None;
+    let mut record = csv::ByteRecord::new();
     loop {
-        match reader.read_record(&mut record) {
+        match reader.read_byte_record(&mut record) {
             Ok(true) => {}
             Ok(false) => break,
             Err(e) => return Err(csv_error(file, &e)),
         }
         let line = record.position().map_or(0, |p| p.line());
-        let field = |c: usize| record.get(c).unwrap_or_default();
         let at = |c: usize| Location::LineField { line, field: headers.get(c).unwrap_or_default().to_owned() };
+        let field = |c: usize| -> Result<&str, ImportError> {
+            std::str::from_utf8(record.get(c).unwrap_or_default())
+                .map_err(|_| ImportError::invalid(file, at(c), "UTF-8 text", "invalid UTF-8"))
+        };
 
-        let raw_time = field(time_column);
+        let raw_time = field(time_column)?;
         let t: i64 = raw_time
             .parse()
             .map_err(|_| ImportError::invalid(file, at(time_column), "an integer timestamp", quote(raw_time, 40)))?;
@@ -212,7 +228,7 @@ pub fn read_closed_loop_trajectory(
 
         let mut values = [0f64; 7];
         for (value, &c) in values.iter_mut().zip(&pose_columns) {
-            *value = parse_finite(file, at(c), field(c))?;
+            *value = parse_finite(file, at(c), field(c)?)?;
         }
         for (i, &c) in pose_columns.iter().enumerate().take(3) {
             if values[i].abs() > MAX_ABS_POSITION_M {
@@ -220,7 +236,7 @@ pub fn read_closed_loop_trajectory(
                     file,
                     at(c),
                     format!("a position within ±{MAX_ABS_POSITION_M} m"),
-                    values[i].to_string(),
+                    field(c)?.to_owned(),
                 ));
             }
         }
@@ -239,27 +255,61 @@ pub fn read_closed_loop_trajectory(
             Quat::from_xyzw((q[0] / scale) as f32, (q[1] / scale) as f32, (q[2] / scale) as f32, (q[3] / scale) as f32);
         let translation = Vec3::new(values[0] as f32, values[1] as f32, values[2] as f32);
 
-        if let Some(cols) = gravity_columns {
+        let raw_gravity = [field(gravity_columns[0])?, field(gravity_columns[1])?, field(gravity_columns[2])?];
+        let repeats_first =
+            gravity_text.as_ref().is_some_and(|first| first.iter().zip(raw_gravity).all(|(a, b)| a == b));
+        if !repeats_first {
+            let gravity_at = || Location::LineField { line, field: "gravity_x_world..gravity_z_world".into() };
+            let written = || format!("({}, {}, {})", raw_gravity[0], raw_gravity[1], raw_gravity[2]);
             let mut g = [0f64; 3];
-            for (v, &c) in g.iter_mut().zip(&cols) {
-                *v = parse_finite(file, at(c), field(c))?;
+            for ((v, &c), raw) in g.iter_mut().zip(&gravity_columns).zip(raw_gravity) {
+                *v = parse_finite(file, at(c), raw)?;
             }
-            let len = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
-            let cos_tilt = if len > 0.0 { -g[up.index()] / len } else { -1.0 };
-            if cos_tilt < MAX_GRAVITY_TILT_DEG.to_radians().cos() {
+            let g = egoexo_core::glam::DVec3::from_array(g);
+            if g.length() < MIN_GRAVITY_NORM {
                 return Err(ImportError::invalid(
                     file,
-                    Location::LineField { line, field: "gravity_x_world..gravity_z_world".into() },
+                    gravity_at(),
                     format!(
-                        "gravity along {} of the world (a gravity-aligned world, within {MAX_GRAVITY_TILT_DEG}°)",
-                        up.name()
+                        "a gravity vector at least {MIN_GRAVITY_NORM} m/s² long (its direction is the world's down)"
                     ),
-                    format!("({}, {}, {})", g[0], g[1], g[2]),
+                    written(),
                 ));
+            }
+            match &gravity_text {
+                None => {
+                    out.gravity_world = g.as_vec3();
+                    first_gravity = g;
+                    gravity_text = Some(raw_gravity.map(str::to_owned));
+                }
+                Some(first_text) => {
+                    if (g - first_gravity).length() > MAX_GRAVITY_CHANGE * first_gravity.length() {
+                        return Err(ImportError::invalid(
+                            file,
+                            gravity_at(),
+                            format!(
+                                "the same gravity on every row (({}, {}, {}) from the first row — a world has one gravity)",
+                                first_text[0], first_text[1], first_text[2]
+                            ),
+                            written(),
+                        ));
+                    }
+                }
+            }
+        }
+        if let Some(c) = quality_column {
+            let raw = field(c)?;
+            let score = parse_finite(file, at(c), raw)?;
+            if score < LOW_QUALITY_SCORE {
+                let run = low_run.get_or_insert(QualitySpan { start_ns: t_ns, end_ns: t_ns, rows: 0 });
+                run.end_ns = t_ns;
+                run.rows += 1;
+            } else if let Some(run) = low_run.take() {
+                out.low_quality.push(run);
             }
         }
         if let Some(c) = graph_column {
-            let uid = field(c);
+            let uid = field(c)?;
             match &graph {
                 None => graph = Some(uid.to_owned()),
                 Some(first) if first != uid => {
@@ -278,7 +328,11 @@ pub fn read_closed_loop_trajectory(
         }
         out.timestamps_ns.push(t_ns);
         out.poses.push(RigidTransform { rotation, translation });
+        if out.poses.len().is_multiple_of(PROGRESS_EVERY_ROWS) {
+            progress(record.position().map_or(0, |p| p.byte()));
+        }
     }
+    out.low_quality.extend(low_run);
     if out.poses.is_empty() {
         return Err(ImportError::new(
             file,
@@ -286,6 +340,7 @@ pub fn read_closed_loop_trajectory(
             ImportErrorKind::Empty { expected: "at least one pose row after the header".into() },
         ));
     }
+    progress(reader.position().byte());
     Ok(out)
 }
 
@@ -296,7 +351,7 @@ fn parse_finite(file: &str, at: Location, raw: &str) -> Result<f64, ImportError>
     }
 }
 
-fn csv_error(file: &str, e: &csv::Error) -> ImportError {
+pub(crate) fn csv_error(file: &str, e: &csv::Error) -> ImportError {
     let line = e.position().map_or(0, |p| p.line());
     let location = if line > 0 { Location::Line(line) } else { Location::File };
     match e.kind() {
@@ -359,10 +414,11 @@ mod tests {
              g1,1000,1700000000000000000,0.1,0.2,1.5,0,0,0,1,0,0,0,0,0,0,0,0,-9.81,1.0,0\n\
              g1,2000,1700000000001000000,0.1,0.2,1.5,0,0,0.7071068,0.7071068,0,0,0,0,0,0,0,0,-9.81,1.0,0\n"
         );
-        let t = read_closed_loop_trajectory("x.csv", csv.as_bytes(), Clock::Device, WorldUp::Z).unwrap();
+        let t = read_closed_loop_trajectory("x.csv", csv.as_bytes(), Clock::Device, &mut |_| {}).unwrap();
+        assert_eq!(t.gravity_world, Vec3::new(0.0, 0.0, -9.81));
         assert_eq!(t.timestamps_ns, vec![1_000_000, 2_000_000]);
         assert!(t.poses[1].rotation.abs_diff_eq(Quat::from_rotation_z(std::f32::consts::FRAC_PI_2), 1e-6));
-        let utc = read_closed_loop_trajectory("x.csv", csv.as_bytes(), Clock::Utc, WorldUp::Z).unwrap();
+        let utc = read_closed_loop_trajectory("x.csv", csv.as_bytes(), Clock::Utc, &mut |_| {}).unwrap();
         assert_eq!(utc.timestamps_ns, vec![1_700_000_000_000_000_000, 1_700_000_000_001_000_000]);
     }
 
@@ -374,7 +430,7 @@ mod tests {
         ];
         let ts = vec![-5, 33_333_333];
         let text = write_closed_loop_trajectory(&ts, &poses, "session", Vec3::new(0.0, -9.81, 0.0));
-        let back = read_closed_loop_trajectory("t.csv", text.as_bytes(), Clock::Device, WorldUp::Y).unwrap();
+        let back = read_closed_loop_trajectory("t.csv", text.as_bytes(), Clock::Device, &mut |_| {}).unwrap();
         assert_eq!(back.timestamps_ns, ts);
         for (a, b) in back.poses.iter().zip(&poses) {
             assert!(a.rotation.abs_diff_eq(b.rotation, 1e-7) && a.translation == b.translation);

@@ -4,9 +4,13 @@
 //! # A device folder
 //! The MPS output of one recording: `closed_loop_trajectory.csv` and (for the wearer's
 //! glasses optional, for observers required) `online_calibration.jsonl`, either at the folder
-//! root, in `slam/`, or in `mps/slam/` (or inside a single sub-folder such as
-//! `mps_<name>_vrs/slam/`). An optional `time_sync.csv` (see [`crate::aria::time_sync`]) at
-//! the folder root or next to the trajectory maps the device clock onto a common one.
+//! root, in `slam/` or `trajectory/`, or in `mps/slam/` or `mps/trajectory/` (or inside a
+//! single sub-folder such as `mps_<name>_vrs/slam/`). An optional `time_sync.csv` (see
+//! [`crate::aria::time_sync`]) at the folder root or next to the trajectory maps the device
+//! clock onto a common one. Next to the trajectory, semidense points
+//! ([`crate::aria::semidense`]) give the floor; MPS hand tracking of the wearer's glasses
+//! (`hand_tracking/` beside the trajectory's folder, [`crate::aria::hand_tracking`]) gives
+//! the wrists when there are no wrist devices.
 //!
 //! # The multi-device layout
 //! ```text
@@ -22,30 +26,39 @@
 //! Either every device folder has a `time_sync.csv` or none does; without them all devices
 //! must share the clock chosen by [`ImportOptions::clock`](super::ImportOptions).
 //!
-//! Conventions are converted here, once (see [`crate::aria`]): Z-up world → Y-up, device
-//! frame → CPF for glasses (wrist devices keep their device frame: a wristband has no CPF),
+//! Conventions are converted here, once (see [`crate::aria`]): the file's world (its gravity
+//! says which way is down) → Y-up, device frame → CPF for glasses (wrist devices keep their device frame: a wristband has no CPF),
 //! `T_device_camera` → `T_cpf_camera`, microseconds → nanoseconds.
 
 use egoexo_core::camera::CameraCalibration;
+use egoexo_core::glam::Vec3;
+use egoexo_core::rigid::RigidTransform;
 use egoexo_core::skeleton::DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE;
 
 use super::ImportOptions;
 use crate::aria::calibration::{RGB_LABEL, middle_record_with, read_online_calibration};
-use crate::aria::time_sync::{TIME_SYNC_FILE, read_time_sync};
-use crate::aria::trajectory::{Clock, WorldUp, read_closed_loop_trajectory};
-use crate::aria::{AriaFrameSize, nominal_t_device_cpf, session_pose_from_aria};
+use crate::aria::hand_tracking::{
+    HAND_TRACKING_DIR, HAND_TRACKING_RESULTS_FILE, HandTracking, Side, WRIST_AND_PALM_FILE, read_hand_tracking,
+    t_device_wrist,
+};
+use crate::aria::semidense::{SEMIDENSE_FILES, SemidenseHeights, read_semidense_heights};
+use crate::aria::time_sync::{TIME_SYNC_FILE, TimeSync, read_time_sync};
+use crate::aria::trajectory::{Clock, CsvTrajectory, read_closed_loop_trajectory};
+use crate::aria::{AriaFrameSize, nominal_t_device_cpf, session_pose_from_file, t_session_world_from_gravity};
 use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
+use crate::floor::{Floor, floor_from_points};
 use crate::json::JsonCtx;
 use crate::keypoints::read_keypoints;
-use crate::model::{Observer, Session, SubjectInfo, Trajectory, Wearer};
+use crate::model::{Observer, Session, SubjectInfo, Trajectory, Wearer, WristSource};
 use crate::vfs::FileTree;
 
 /// File name of an MPS closed-loop trajectory.
 pub const TRAJECTORY_FILE: &str = "closed_loop_trajectory.csv";
 /// File name of MPS online calibrations.
 pub const CALIBRATION_FILE: &str = "online_calibration.jsonl";
-/// Where a device folder may keep its MPS SLAM output.
-pub const SLAM_DIRS: [&str; 3] = ["", "slam/", "mps/slam/"];
+/// Where a device folder may keep its MPS SLAM output (`trajectory/` is the name MPS's own
+/// output folders use, `slam/` the datasets').
+pub const SLAM_DIRS: [&str; 5] = ["", "slam/", "trajectory/", "mps/slam/", "mps/trajectory/"];
 
 /// The files of one device folder (paths relative to the folder's view).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -53,6 +66,11 @@ pub struct DeviceFiles {
     pub trajectory: String,
     pub calibration: Option<String>,
     pub time_sync: Option<String>,
+    /// Semidense points next to the trajectory.
+    pub semidense: Option<String>,
+    /// Hand tracking: `hand_tracking_results.csv` (preferred: full wrist poses) or
+    /// `wrist_and_palm_poses.csv`, in `hand_tracking/` beside the trajectory's folder.
+    pub hand_tracking: Option<String>,
 }
 
 /// Finds the MPS files of a device folder; `None` if it has no trajectory.
@@ -65,7 +83,20 @@ pub fn find_device(dir: &FileTree) -> Result<Option<DeviceFiles>, ImportError> {
                 let time_sync = [format!("{base}{TIME_SYNC_FILE}"), format!("{base}{slam}{TIME_SYNC_FILE}")]
                     .into_iter()
                     .find(|p| dir.contains(p));
-                DeviceFiles { trajectory, calibration: dir.contains(&calibration).then_some(calibration), time_sync }
+                let semidense = SEMIDENSE_FILES.iter().map(|f| format!("{base}{slam}{f}")).find(|p| dir.contains(p));
+                // `hand_tracking/` is a sibling of the SLAM folder (`mps/slam/` → `mps/hand_tracking/`).
+                let mps_root = slam.strip_suffix("slam/").or_else(|| slam.strip_suffix("trajectory/")).unwrap_or(slam);
+                let hand_tracking = [HAND_TRACKING_RESULTS_FILE, WRIST_AND_PALM_FILE]
+                    .iter()
+                    .map(|f| format!("{base}{mps_root}{HAND_TRACKING_DIR}{f}"))
+                    .find(|p| dir.contains(p));
+                DeviceFiles {
+                    trajectory,
+                    calibration: dir.contains(&calibration).then_some(calibration),
+                    time_sync,
+                    semidense,
+                    hand_tracking,
+                }
             })
         })
     };
@@ -104,19 +135,26 @@ pub(crate) struct LoadedDevice {
     pub camera: Option<CameraCalibration>,
     /// Whether a `time_sync.csv` put it on the common clock.
     pub synced: bool,
+    /// The wearer's wrists from MPS hand tracking (head devices with hand tracking).
+    pub hand_wrists: Option<([Option<Trajectory>; 2], WristSource)>,
+    /// The floor from semidense points (head devices with points that show one).
+    pub floor: Option<Floor>,
 }
 
 /// Reads and converts one device folder.
 pub(crate) fn load_device(
     dir: &FileTree,
     role: DeviceRole,
-    clock: Clock,
+    options: &ImportOptions,
     warnings: &mut Vec<ImportWarning>,
 ) -> Result<LoadedDevice, ImportError> {
+    let clock = options.clock;
     let files = find_device(dir)?.ok_or_else(|| {
         ImportError::missing_file(
             dir.display_path(TRAJECTORY_FILE),
-            format!("an Aria MPS device folder with {TRAJECTORY_FILE} (at its root, in slam/ or in mps/slam/)"),
+            format!(
+                "an Aria MPS device folder with {TRAJECTORY_FILE} (at its root, or in slam/, trajectory/, mps/slam/ or mps/trajectory/)"
+            ),
         )
     })?;
     let records = match &files.calibration {
@@ -136,6 +174,16 @@ pub(crate) fn load_device(
             let middle = &records[records.len() / 2];
             let camera = if role == DeviceRole::Observer {
                 let (record, rgb) = middle_record_with(&calibration_name(), records, RGB_LABEL)?;
+                if !rgb.size_from_image_sizes {
+                    let c = &rgb.calibration;
+                    warnings.push(ImportWarning {
+                        file: calibration_name(),
+                        message: format!(
+                            "no ImageSizes (an MPS < 1.1 calibration): the RGB camera is taken at the sensor's full {}×{} px; keypoints are read in those pixels unless they show a smaller image",
+                            c.width, c.height
+                        ),
+                    });
+                }
                 let t_device_cpf = record.t_device_cpf();
                 let mut camera = rgb.calibration;
                 camera.t_device_camera = t_device_cpf.inverse() * rgb.calibration.t_device_camera;
@@ -162,86 +210,279 @@ pub(crate) fn load_device(
     };
 
     let trajectory_file = dir.display_path(&files.trajectory);
-    let raw = read_closed_loop_trajectory(&trajectory_file, &dir.read(&files.trajectory)?, clock, WorldUp::Z)?;
-    let mut timestamps_ns = raw.timestamps_ns;
-    let synced = match (&files.time_sync, clock) {
+    let size = dir.size(&files.trajectory).unwrap_or(0);
+    let raw = read_closed_loop_trajectory(
+        &trajectory_file,
+        dir.open_reader(&files.trajectory)?,
+        clock,
+        &mut options.progress_of(&trajectory_file, size),
+    )?;
+    warn_low_quality(&trajectory_file, &raw, warnings);
+    let t_session_file = t_session_world_from_gravity(raw.gravity_world);
+    let sync = match (&files.time_sync, clock) {
         (Some(path), Clock::Device) => {
             let sync_file = dir.display_path(path);
-            let sync = read_time_sync(&sync_file, &dir.read(path)?)?;
-            for (i, t) in timestamps_ns.iter_mut().enumerate() {
-                *t = sync.map(*t).ok_or_else(|| {
-                    ImportError::invalid(
-                        &sync_file,
-                        Location::File,
-                        "a mapping that stays within i64 nanoseconds",
-                        format!("overflow at pose {i}"),
-                    )
-                })?;
-            }
-            if let Some(i) = timestamps_ns.windows(2).position(|w| w[1] <= w[0]) {
-                return Err(ImportError::invalid(
-                    &sync_file,
-                    Location::File,
-                    format!("a mapping that keeps the poses of {trajectory_file} strictly increasing"),
-                    format!("poses {} and {} map to {} and {}", i, i + 1, timestamps_ns[i], timestamps_ns[i + 1]),
-                ));
-            }
-            true
+            Some((read_time_sync(&sync_file, &dir.read(path)?)?, sync_file))
         }
         (Some(path), Clock::Utc) => {
             warnings.push(ImportWarning {
                 file: dir.display_path(path),
                 message: "ignored: it maps the device clock, but the UTC clock was chosen".into(),
             });
-            false
+            None
         }
-        (None, _) => false,
+        (None, _) => None,
+    };
+    // The device (not CPF) in the session world, on the file's clock: hand tracking is
+    // expressed with it before any clock mapping.
+    let device_poses: Vec<RigidTransform> =
+        raw.poses.iter().map(|p| session_pose_from_file(&t_session_file, p, None)).collect();
+    let hand_wrists = match (&files.hand_tracking, role) {
+        (Some(path), DeviceRole::Head) => {
+            let file = dir.display_path(path);
+            if clock == Clock::Utc {
+                warnings.push(ImportWarning {
+                    file,
+                    message: "ignored: hand tracking is timed on the device clock, but the UTC clock was chosen".into(),
+                });
+                None
+            } else {
+                let hands = read_hand_tracking(&file, dir.open_reader(path)?)?;
+                let device = Trajectory { timestamps_ns: raw.timestamps_ns.clone(), poses: device_poses.clone() };
+                let mut wrists = wrists_in_world(&hands, &device, warnings, &file);
+                if let Some((sync, sync_file)) = &sync {
+                    for wrist in wrists.iter_mut().flatten() {
+                        map_clock(&mut wrist.timestamps_ns, sync, sync_file, &file)?;
+                    }
+                }
+                let source = WristSource::HandTracking { file, form: hands.form, orientation: hands.orientation() };
+                Some((wrists, source))
+            }
+        }
+        _ => None,
+    };
+    let mut timestamps_ns = raw.timestamps_ns;
+    let synced = match &sync {
+        Some((sync, sync_file)) => {
+            map_clock(&mut timestamps_ns, sync, sync_file, &trajectory_file)?;
+            true
+        }
+        None => false,
     };
     let cpf = match role {
         DeviceRole::Head | DeviceRole::Observer => Some(&t_device_cpf),
         DeviceRole::Wrist => None,
     };
-    let poses = raw.poses.iter().map(|p| session_pose_from_aria(p, cpf)).collect();
-    Ok(LoadedDevice { trajectory: Trajectory { timestamps_ns, poses }, camera, synced })
+    let poses: Vec<RigidTransform> = match cpf {
+        Some(cpf) => device_poses.iter().map(|p| *p * *cpf).collect(),
+        None => device_poses,
+    };
+    let trajectory = Trajectory { timestamps_ns, poses };
+    let floor = match (&files.semidense, role) {
+        (Some(path), DeviceRole::Head) => {
+            let file = dir.display_path(path);
+            let SemidenseHeights { heights, rows } = read_semidense_heights(
+                &file,
+                dir.open_reader(path)?,
+                &t_session_file,
+                &mut options.progress_of(&file, 0),
+            )?;
+            let floor = floor_from_points(&heights, &trajectory, &file);
+            if floor.is_none() {
+                warnings.push(ImportWarning {
+                    file,
+                    message: format!(
+                        "{} of {rows} points are well constrained, but none form a floor {}–{} m below the standing head; the floor is estimated from the standing head instead",
+                        heights.count(),
+                        crate::floor::MIN_EYE_HEIGHT_M,
+                        crate::floor::MAX_EYE_HEIGHT_M
+                    ),
+                });
+            }
+            floor
+        }
+        _ => None,
+    };
+    Ok(LoadedDevice { trajectory, camera, synced, hand_wrists, floor })
+}
+
+/// Maps `timestamps` (of `what`) onto the common clock of `sync`; they must stay strictly
+/// increasing.
+fn map_clock(timestamps: &mut [i64], sync: &TimeSync, sync_file: &str, what: &str) -> Result<(), ImportError> {
+    for (i, t) in timestamps.iter_mut().enumerate() {
+        *t = sync.map(*t).ok_or_else(|| {
+            ImportError::invalid(
+                sync_file,
+                Location::File,
+                "a mapping that stays within i64 nanoseconds",
+                format!("overflow at sample {i} of {what}"),
+            )
+        })?;
+    }
+    if let Some(i) = timestamps.windows(2).position(|w| w[1] <= w[0]) {
+        return Err(ImportError::invalid(
+            sync_file,
+            Location::File,
+            format!("a mapping that keeps the samples of {what} strictly increasing"),
+            format!("samples {} and {} map to {} and {}", i, i + 1, timestamps[i], timestamps[i + 1]),
+        ));
+    }
+    Ok(())
+}
+
+/// Tells the user about runs of low `quality_score` (kept, but worth knowing).
+fn warn_low_quality(file: &str, raw: &CsvTrajectory, warnings: &mut Vec<ImportWarning>) {
+    if raw.low_quality.is_empty() {
+        return;
+    }
+    let start = raw.timestamps_ns[0];
+    let rows: usize = raw.low_quality.iter().map(|s| s.rows).sum();
+    let seconds = |t: i64| (t - start) as f64 / 1e9;
+    let mut spans: Vec<String> = raw
+        .low_quality
+        .iter()
+        .take(5)
+        .map(|s| format!("{:.2}–{:.2} s", seconds(s.start_ns), seconds(s.end_ns)))
+        .collect();
+    if raw.low_quality.len() > 5 {
+        spans.push(format!("and {} more", raw.low_quality.len() - 5));
+    }
+    warnings.push(ImportWarning {
+        file: file.to_owned(),
+        message: format!(
+            "{rows} of {} poses have quality_score below {} ({} after the start); they are kept, but the head may be off there",
+            raw.poses.len(),
+            crate::aria::trajectory::LOW_QUALITY_SCORE,
+            spans.join(", ")
+        ),
+    });
+}
+
+/// MPS hand observations (device frame, device clock) → wrist trajectories in the session
+/// world with the head device's trajectory `device` (session world, device frame, same
+/// clock) interpolated at each sample's time. Samples outside the trajectory or in a gap of
+/// it, and hands with no direction (wrist and palm on top of each other), are left out.
+fn wrists_in_world(
+    hands: &HandTracking,
+    device: &Trajectory,
+    warnings: &mut Vec<ImportWarning>,
+    file: &str,
+) -> [Option<Trajectory>; 2] {
+    let mut dropped = 0usize;
+    let mut out = [None, None];
+    for (slot, side) in out.iter_mut().zip([Side::Left, Side::Right]) {
+        let samples = hands.hand(side);
+        let at = crate::align::resample_trajectory(device, &samples.timestamps_ns, crate::align::DEFAULT_MAX_GAP_NS);
+        let mut wrist = Trajectory::default();
+        for ((&t, observation), (t_world_device, &valid)) in
+            samples.timestamps_ns.iter().zip(&samples.observations).zip(at.poses.iter().zip(&at.valid))
+        {
+            let down_device = t_world_device.rotation.conjugate() * Vec3::NEG_Y;
+            match t_device_wrist(side, observation, down_device) {
+                Some(t_device_wrist) if valid => {
+                    wrist.timestamps_ns.push(t);
+                    wrist.poses.push(*t_world_device * t_device_wrist);
+                }
+                _ => dropped += 1,
+            }
+        }
+        *slot = (!wrist.is_empty()).then_some(wrist);
+    }
+    if dropped > 0 {
+        warnings.push(ImportWarning {
+            file: file.to_owned(),
+            message: format!(
+                "{dropped} tracked hand samples left out: outside the head trajectory, in a gap of it, or with the wrist on the palm"
+            ),
+        });
+    }
+    let tracked = |side| hands.hand(side).timestamps_ns.len() as f64 / hands.rows.max(1) as f64 * 100.0;
+    warnings.push(ImportWarning {
+        file: file.to_owned(),
+        message: format!(
+            "wrists from hand tracking ({}): left hand tracked on {:.0}% of {} rows, right on {:.0}%",
+            hands.form.describe(),
+            tracked(Side::Left),
+            hands.rows,
+            tracked(Side::Right)
+        ),
+    });
+    out
+}
+
+/// The wearer's devices: glasses and wrists (left, right).
+pub(crate) struct LoadedWearer {
+    pub head: LoadedDevice,
+    pub wrists: [Option<Trajectory>; 2],
+    pub wrist_source: WristSource,
+}
+
+impl LoadedWearer {
+    /// The session's wearer.
+    pub(crate) fn into_wearer(self) -> (Wearer, Option<Floor>) {
+        let [left_wrist, right_wrist] = self.wrists;
+        let wearer = Wearer {
+            head: self.head.trajectory,
+            left_wrist,
+            right_wrist,
+            wrist_source: self.wrist_source,
+            head_joint_in_device: DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE,
+        };
+        (wearer, self.head.floor)
+    }
 }
 
 /// Loads the device folders of one multi-device recording (the Aria multi-device layout,
 /// Nymeria) and checks at the end that either all or none of them were on a common clock.
 pub(crate) struct DeviceLoader<'w> {
-    clock: Clock,
+    options: &'w ImportOptions,
     warnings: &'w mut Vec<ImportWarning>,
     /// `(folder, synced)` per loaded device, in load order.
     synced: Vec<(String, bool)>,
 }
 
 impl<'w> DeviceLoader<'w> {
-    pub(crate) fn new(clock: Clock, warnings: &'w mut Vec<ImportWarning>) -> Self {
-        Self { clock, warnings, synced: Vec::new() }
+    pub(crate) fn new(options: &'w ImportOptions, warnings: &'w mut Vec<ImportWarning>) -> Self {
+        Self { options, warnings, synced: Vec::new() }
     }
 
     /// Loads the device folder `dir` of `root`.
     pub(crate) fn device(&mut self, root: &FileTree, dir: &str, role: DeviceRole) -> Result<LoadedDevice, ImportError> {
-        let device = load_device(&root.view(dir), role, self.clock, self.warnings)?;
+        let device = load_device(&root.view(dir), role, self.options, self.warnings)?;
         self.synced.push((format!("{dir}/"), device.synced));
         Ok(device)
     }
 
-    /// The wearer's glasses in `head_dir` and, where those folders exist, the wrist devices in
-    /// `wrist_dirs` (left, right).
+    /// The wearer's glasses in `head_dir` and their wrists: the wrist devices in `wrist_dirs`
+    /// (left, right) where those folders exist, else the glasses' MPS hand tracking.
     pub(crate) fn wearer(
         &mut self,
         root: &FileTree,
         head_dir: &str,
         wrist_dirs: [&str; 2],
-    ) -> Result<(LoadedDevice, [Option<Trajectory>; 2]), ImportError> {
-        let head = self.device(root, head_dir, DeviceRole::Head)?;
+    ) -> Result<LoadedWearer, ImportError> {
+        let mut head = self.device(root, head_dir, DeviceRole::Head)?;
         let mut wrists = [None, None];
         for (slot, dir) in wrists.iter_mut().zip(wrist_dirs) {
             if root.contains_dir(dir) {
                 *slot = Some(self.device(root, dir, DeviceRole::Wrist)?.trajectory);
             }
         }
-        Ok((head, wrists))
+        let mut wrist_source = WristSource::Devices;
+        if let Some((tracked, source)) = head.hand_wrists.take() {
+            if wrists.iter().any(Option::is_some) {
+                if let WristSource::HandTracking { file, .. } = &source {
+                    self.warnings.push(ImportWarning {
+                        file: file.clone(),
+                        message: "ignored: the wrist devices are used".into(),
+                    });
+                }
+            } else {
+                wrists = tracked;
+                wrist_source = source;
+            }
+        }
+        Ok(LoadedWearer { head, wrists, wrist_source })
     }
 
     /// The observer `id` in the device folder `dir` of `root`: its trajectory, its RGB camera
@@ -295,23 +536,22 @@ pub fn import_single_device(
     options: &ImportOptions,
 ) -> Result<(Session, Vec<ImportWarning>), ImportError> {
     let mut warnings = Vec::new();
-    let head = load_device(root, DeviceRole::Head, options.clock, &mut warnings)?;
+    let mut head = load_device(root, DeviceRole::Head, options, &mut warnings)?;
     warnings.push(ImportWarning {
         file: root.display_path(""),
         message: "one device: a session without observers (add observers with the multi-device layout)".into(),
     });
+    let (wrists, wrist_source) = head.hand_wrists.take().unwrap_or_default();
+    let (wearer, floor) = LoadedWearer { head, wrists, wrist_source }.into_wearer();
     let session = Session {
         name: name.to_owned(),
-        wearer: wearer(head.trajectory, None, None),
+        wearer,
         observers: Vec::new(),
         subject: SubjectInfo::default(),
         ground_truth: None,
+        floor,
     };
     Ok((session, warnings))
-}
-
-fn wearer(head: Trajectory, left_wrist: Option<Trajectory>, right_wrist: Option<Trajectory>) -> Wearer {
-    Wearer { head, left_wrist, right_wrist, head_joint_in_device: DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE }
 }
 
 /// Imports the multi-device layout (see the module docs).
@@ -321,8 +561,8 @@ pub fn import_multi_device(
     options: &ImportOptions,
 ) -> Result<(Session, Vec<ImportWarning>), ImportError> {
     let mut warnings = Vec::new();
-    let mut devices = DeviceLoader::new(options.clock, &mut warnings);
-    let (head, wrists) = devices.wearer(root, "wearer", ["left_wrist", "right_wrist"])?;
+    let mut devices = DeviceLoader::new(options, &mut warnings);
+    let (wearer, floor) = devices.wearer(root, "wearer", ["left_wrist", "right_wrist"])?.into_wearer();
     let mut observers = Vec::new();
     for id in root.subdirs("observers") {
         let dir = format!("observers/{id}");
@@ -360,14 +600,7 @@ pub fn import_multi_device(
         });
         SubjectInfo::default()
     };
-    let [left_wrist, right_wrist] = wrists;
-    let session = Session {
-        name: name.to_owned(),
-        wearer: wearer(head.trajectory, left_wrist, right_wrist),
-        observers,
-        subject,
-        ground_truth: None,
-    };
+    let session = Session { name: name.to_owned(), wearer, observers, subject, ground_truth: None, floor };
     Ok((session, warnings))
 }
 

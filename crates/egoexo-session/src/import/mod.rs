@@ -31,6 +31,34 @@ pub struct KeypointFile {
     pub bytes: Vec<u8>,
 }
 
+/// Called while big files are read (a 1 kHz trajectory of an hour is 3.6 M rows): the file
+/// (as named in messages), what was read so far and the total, in bytes — or in rows with a
+/// total of 0 where the size is unknown (compressed files).
+#[derive(Clone)]
+pub struct ImportProgress(pub std::sync::Arc<ProgressFn>);
+
+/// `(file, done, total)`: see [`ImportProgress`].
+pub type ProgressFn = dyn Fn(&str, u64, u64) + Send + Sync;
+
+impl std::fmt::Debug for ImportProgress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("ImportProgress(..)")
+    }
+}
+
+impl PartialEq for ImportProgress {
+    fn eq(&self, other: &Self) -> bool {
+        std::sync::Arc::ptr_eq(&self.0, &other.0)
+    }
+}
+
+impl ImportProgress {
+    /// Reports `done` of `total` for `file`.
+    pub fn report(&self, file: &str, done: u64, total: u64) {
+        (self.0)(file, done, total);
+    }
+}
+
 /// Import choices.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ImportOptions {
@@ -40,6 +68,20 @@ pub struct ImportOptions {
     pub coco: CocoTiming,
     /// Keypoint files to attach to observers (replacing any the session has).
     pub keypoint_files: Vec<KeypointFile>,
+    /// Progress of big files, if anyone is watching.
+    pub progress: Option<ImportProgress>,
+}
+
+impl ImportOptions {
+    /// A progress callback for `file` (of `total` bytes, 0 if unknown) that forwards to
+    /// [`ImportOptions::progress`], if set.
+    pub(crate) fn progress_of<'a>(&'a self, file: &'a str, total: u64) -> impl FnMut(u64) + 'a {
+        move |done| {
+            if let Some(p) = &self.progress {
+                p.report(file, done, total);
+            }
+        }
+    }
 }
 
 /// What kind of input was recognised.
@@ -116,8 +158,49 @@ pub fn import_session(tree: &FileTree, options: &ImportOptions) -> Result<Import
     for file in &options.keypoint_files {
         attach_keypoints(&mut session, file, options.coco, &mut warnings)?;
     }
+    fit_full_resolution_cameras_to_keypoints(&mut session, &mut warnings);
+    // A recording gets its floor here; a `.egoexo` keeps what it stores (readers estimate one
+    // where it stores none: `Session::floor_or_estimate`).
+    if session.floor.is_none() && source != SourceKind::Egoexo {
+        session.floor = crate::floor::floor_from_standing_head(&session);
+    }
     warnings.extend(crate::validate::validate_session(&session)?);
     Ok(Imported { session, source, warnings })
+}
+
+/// Keypoint detections needed before their extent is trusted to tell the image size.
+pub const MIN_DETECTIONS_FOR_IMAGE_SIZE: usize = 50;
+/// The Aria RGB stream's usual resolution, pixels.
+pub const ARIA_RGB_STREAM_PX: u32 = 1408;
+
+/// Calibrations without `ImageSizes` (MPS < 1.1) are at the RGB sensor's full resolution
+/// (2880 px), but recordings usually stream 1408 px images, and keypoints detected on those
+/// are in 1408 px coordinates. When every keypoint of an observer with such a calibration lies
+/// inside 1408 × 1408 (at least [`MIN_DETECTIONS_FOR_IMAGE_SIZE`] of them), the camera is
+/// rescaled to 1408 px — with a warning, as it is an inference from the keypoints' extent.
+pub fn fit_full_resolution_cameras_to_keypoints(session: &mut Session, warnings: &mut Vec<ImportWarning>) {
+    let full = crate::aria::calibration::RGB_FULL_RES_PX;
+    for observer in &mut session.observers {
+        let Some(track) = &observer.keypoints else { continue };
+        if observer.camera.width != full || observer.camera.height != full {
+            continue;
+        }
+        let points: Vec<_> = track.frames.iter().flatten().flatten().map(|k| k.pixel).collect();
+        let limit = ARIA_RGB_STREAM_PX as f32 - 0.5;
+        if points.len() < MIN_DETECTIONS_FOR_IMAGE_SIZE || points.iter().any(|p| p.x > limit || p.y > limit) {
+            continue;
+        }
+        if let Ok(camera) = observer.camera.scaled_to(ARIA_RGB_STREAM_PX, ARIA_RGB_STREAM_PX) {
+            warnings.push(ImportWarning {
+                file: format!("observer `{}`", observer.id),
+                message: format!(
+                    "its calibration is at the RGB sensor's full {full} px (no ImageSizes) but all {} keypoints lie within {ARIA_RGB_STREAM_PX} px: they were detected on the {ARIA_RGB_STREAM_PX} px stream, so the camera was rescaled to {ARIA_RGB_STREAM_PX}×{ARIA_RGB_STREAM_PX}",
+                    points.len()
+                ),
+            });
+            observer.camera = camera;
+        }
+    }
 }
 
 /// Reads a keypoint file into the observer it names.

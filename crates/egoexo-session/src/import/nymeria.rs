@@ -32,7 +32,7 @@ use super::ImportOptions;
 use super::aria_mps::DeviceLoader;
 use crate::aria::session_smpl_pose_from_aria;
 use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
-use crate::model::{GroundTruth, Session, SubjectInfo, Wearer};
+use crate::model::{GroundTruth, Session, SubjectInfo};
 use crate::npz::{NpyArray, Npz};
 use crate::vfs::FileTree;
 
@@ -52,8 +52,8 @@ pub fn import_nymeria(
     options: &ImportOptions,
 ) -> Result<(Session, Vec<ImportWarning>), ImportError> {
     let mut warnings = Vec::new();
-    let mut devices = DeviceLoader::new(options.clock, &mut warnings);
-    let (head, wrists) = devices.wearer(root, "recording_head", ["recording_lwrist", "recording_rwrist"])?;
+    let mut devices = DeviceLoader::new(options, &mut warnings);
+    let loaded = devices.wearer(root, "recording_head", ["recording_lwrist", "recording_rwrist"])?;
     let mut observers = Vec::new();
     let observer_missing = !root.contains_dir("recording_observer");
     if !observer_missing {
@@ -85,8 +85,8 @@ pub fn import_nymeria(
         warnings.push(ImportWarning { file: root.display_path(SMPL_FILE), message: "missing: no ground truth".into() });
         None
     };
-    let [left_wrist, right_wrist] = wrists;
-    if left_wrist.is_some() != right_wrist.is_some() {
+    let (wearer, floor) = loaded.into_wearer();
+    if wearer.left_wrist.is_some() != wearer.right_wrist.is_some() {
         warnings.push(ImportWarning {
             file: root.display_path(""),
             message: "only one wrist recording; 3-point tracking needs both".into(),
@@ -94,17 +94,48 @@ pub fn import_nymeria(
     }
     let session = Session {
         name: name.to_owned(),
-        wearer: Wearer {
-            head: head.trajectory,
-            left_wrist,
-            right_wrist,
-            head_joint_in_device: egoexo_core::skeleton::DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE,
-        },
+        floor: floor.or_else(|| ground_truth.as_ref().and_then(|gt| crate::floor::floor_from_ground_truth(&gt.motion))),
+        wearer,
         observers,
         subject,
         ground_truth,
     };
     Ok((session, warnings))
+}
+
+/// Fewest frames, as a fraction, on which the converted body's head must be above its pelvis.
+pub const MIN_UPRIGHT_FRACTION: f32 = 0.5;
+
+/// Upstream loaders disagree on whether Nymeria's SMPL fits are Z-up or Y-up; this importer
+/// reads them as Z-up (the Aria world). Converted the wrong way, the body lies on its back or
+/// stands on its head: refuse unless the head is above the pelvis (session +Y) on at least
+/// [`MIN_UPRIGHT_FRACTION`] of the frames (people lie down, but not for most of a recording).
+pub fn check_head_above_pelvis(file: &str, motion: &SmplMotion) -> Result<(), ImportError> {
+    let head = egoexo_core::skeleton::SmplJoint::Head.index();
+    let stride = (motion.len() / 2000).max(1);
+    let (mut upright, mut checked) = (0usize, 0usize);
+    for pose in motion.poses.iter().step_by(stride) {
+        let fk = motion.skeleton.forward_kinematics(pose);
+        let rise = fk.positions[head].y - fk.positions[0].y;
+        upright += usize::from(rise > 0.2);
+        checked += 1;
+    }
+    let fraction = upright as f32 / checked.max(1) as f32;
+    if fraction < MIN_UPRIGHT_FRACTION {
+        return Err(ImportError::invalid(
+            file,
+            Location::Field("global_orient".into()),
+            format!(
+                "a Z-up SMPL fit (Nymeria's Aria world), whose head is above the pelvis after conversion to Y-up on at least {:.0}% of the frames",
+                MIN_UPRIGHT_FRACTION * 100.0
+            ),
+            format!(
+                "the head above the pelvis on {:.0}% of the frames — is this fit Y-up or otherwise rotated? Convert it to Z-up first",
+                fraction * 100.0
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Reads `xdata_smpl_neutral.npz` into a fixed-rate motion in the session's Y-up world.
@@ -239,6 +270,7 @@ pub fn read_nymeria_smpl(file: &str, npz: &Npz) -> Result<(SmplMotion, Vec<Impor
     }
     let motion = SmplMotion::new(fps as f32, start, skeleton, betas, poses)
         .map_err(|e| ImportError::invalid(file, Location::File, "a valid SMPL motion", e.to_string()))?;
+    check_head_above_pelvis(file, &motion)?;
     warnings.push(ImportWarning {
         file: file.into(),
         message: "no SMPL model is shipped: the neutral mean-shape skeleton is used for the ground truth (betas kept)"

@@ -208,7 +208,9 @@ describe('bad input and failures', () => {
       assert.match(facts, /right wrist\s*tracked on \d+\.\d% of frames, longest gap 0\.[23]\d s/);
       assert.match(facts, /floor\s*-?0\.0\d\d m, from semidense points \(\d+ well-constrained points at the floor/);
       const scene = await app.page.evaluate(() => {
-        const s = typeof window.egoexo.scene === 'string' ? JSON.parse(window.egoexo.scene) : window.egoexo.scene;
+        const raw = window.egoexo.scene;
+        const s = typeof raw === 'string' ? JSON.parse(raw)
+          : (raw instanceof ArrayBuffer || ArrayBuffer.isView(raw)) ? JSON.parse(new TextDecoder().decode(raw)) : raw;
         return { floor_y: s.floor_y, fps: s.fps, devices: s.devices.map((d) => ({ name: d.name, valid: d.valid })) };
       });
       assert.ok(Math.abs(scene.floor_y) < 0.01, `the scene stands on the session's floor: ${scene.floor_y}`);

@@ -57,10 +57,26 @@ fn main() -> anyhow::Result<()> {
     let bytes = std::fs::metadata(&path)?.len();
     println!("wrote {rows} rows, {:.1} MB: {}", bytes as f64 / 1e6, path.display());
     let started = Instant::now();
+    let file = std::io::BufReader::with_capacity(1 << 16, std::fs::File::open(&path)?);
+    let read = egoexo_session::aria::trajectory::read_closed_loop_trajectory(
+        "closed_loop_trajectory.csv",
+        file,
+        egoexo_session::aria::trajectory::Clock::Device,
+        &mut |_| {},
+    )?;
+    let seconds = started.elapsed().as_secs_f64();
+    println!(
+        "the reader alone: {} rows in {seconds:.2} s: {:.2} M rows/s, {:.0} MB/s",
+        read.poses.len(),
+        rows as f64 / seconds / 1e6,
+        bytes as f64 / seconds / 1e6
+    );
+    drop(read);
+    let started = Instant::now();
     let imported = import_path(&dir, &ImportOptions::default())?;
     let seconds = started.elapsed().as_secs_f64();
     println!(
-        "imported {} poses in {seconds:.2} s: {:.2} M rows/s, {:.0} MB/s",
+        "the whole import (read, convert, validate, floor): {} poses in {seconds:.2} s: {:.2} M rows/s, {:.0} MB/s",
         imported.session.wearer.head.len(),
         rows as f64 / seconds / 1e6,
         bytes as f64 / seconds / 1e6

@@ -414,6 +414,28 @@ fn a_1khz_trajectory_with_a_low_quality_start_imports_with_a_warning() {
 }
 
 #[test]
+fn big_files_report_progress_up_to_their_size() {
+    use std::sync::{Arc, Mutex};
+    let files = mps_device_folder(None, true, false);
+    let size = files["trajectory/closed_loop_trajectory.csv"].len() as u64;
+    let reports = Arc::new(Mutex::new(Vec::<(String, u64, u64)>::new()));
+    let sink = reports.clone();
+    let options = ImportOptions {
+        progress: Some(egoexo_session::import::ImportProgress(Arc::new(move |file: &str, done: u64, total: u64| {
+            sink.lock().unwrap().push((file.to_owned(), done, total));
+        }))),
+        ..ImportOptions::default()
+    };
+    import_session(&FileTree::from_files("mps", files, Limits::default()).unwrap(), &options).unwrap();
+    let reports = reports.lock().unwrap();
+    let trajectory: Vec<_> = reports.iter().filter(|r| r.0.ends_with("closed_loop_trajectory.csv")).collect();
+    assert!(trajectory.iter().all(|r| r.2 == size && r.1 <= size));
+    assert_eq!(trajectory.last().map(|r| r.1), Some(size), "the last report is the whole file");
+    let points = reports.iter().filter(|r| r.0.ends_with("global_points.csv.gz")).next_back().unwrap();
+    assert_eq!((points.1, points.2), (10_000, 0), "rows of a compressed file, total unknown");
+}
+
+#[test]
 fn a_y_up_world_imports_as_the_z_up_one() {
     let z_up = import(mps_device_folder(None, false, false)).session;
     let y_up = import(mps_device_folder(None, false, true)).session;

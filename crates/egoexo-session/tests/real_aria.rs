@@ -431,7 +431,7 @@ fn big_files_report_progress_up_to_their_size() {
     let trajectory: Vec<_> = reports.iter().filter(|r| r.0.ends_with("closed_loop_trajectory.csv")).collect();
     assert!(trajectory.iter().all(|r| r.2 == size && r.1 <= size));
     assert_eq!(trajectory.last().map(|r| r.1), Some(size), "the last report is the whole file");
-    let points = reports.iter().filter(|r| r.0.ends_with("global_points.csv.gz")).next_back().unwrap();
+    let points = reports.iter().rfind(|r| r.0.ends_with("global_points.csv.gz")).unwrap();
     assert_eq!((points.1, points.2), (10_000, 0), "rows of a compressed file, total unknown");
 }
 

@@ -142,6 +142,16 @@ fn inspect_an_mps_folder_shows_wrist_coverage_floor_and_why_1_point() {
     assert_eq!(v["wrist_source"]["form"], "wrist_and_palm_v2");
     assert!(v["floor"]["height_m"].as_f64().unwrap().abs() < 0.005);
     assert!((v["wrists"][0]["tracked_percent"].as_f64().unwrap() - 98.9).abs() < 0.1);
+    // Reconstructing it takes the 1-point model by default and says why.
+    let out = dir.with_file_name("motion.json");
+    let o = egoexo(&["reconstruct", path_str(&dir), "-o", path_str(&out), "--ego-only", "--force"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("note: reconstructing with the 1-point model: the wrists are tracked on only"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(stdout(&o).contains("(ego-only, 1-point)"), "{}", stdout(&o));
 }
 
 #[test]

@@ -30,7 +30,8 @@ pub struct Args {
     /// Models folder [default: ./models, else the repository's models/].
     #[arg(long)]
     pub models: Option<PathBuf>,
-    /// Wearer tracking [default: 3 when the session has both wrists].
+    /// Wearer tracking [default: 3 when both wrists are tracked on at least 98% of the head's
+    /// frames, else 1 — wrists from hand tracking come and go].
     #[arg(long, value_enum)]
     pub tracking: Option<TrackingArg>,
     /// Output frame rate.
@@ -54,6 +55,11 @@ pub fn run(args: Args) -> Result<()> {
     }
     let aligned = align(&imported.session, &AlignOptions { fps: args.fps, ..AlignOptions::default() })?;
     let tracking = resolve_tracking(&aligned, args.tracking.map(TrackingMode::from))?;
+    if args.tracking.is_none()
+        && let Some(reason) = aligned.tracking_choice().reason
+    {
+        eprintln!("note: reconstructing with the 1-point model: {reason}");
+    }
     let dir = models_dir(args.models.as_deref());
     let manifest = read_manifest(&dir)?;
     let set = load_model_set(&dir, &manifest, tracking)?

@@ -29,6 +29,7 @@ pub mod camera;
 pub mod ego_features;
 pub mod euler;
 pub mod exo_keypoints;
+pub mod foot_contact;
 pub mod gate_features;
 pub mod metrics;
 pub mod motion;

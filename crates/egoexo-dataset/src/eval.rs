@@ -13,6 +13,7 @@
 use egoexo_core::TrackingMode;
 use egoexo_core::aligned::AlignedSession;
 use egoexo_core::ego_features::EGO_FEATURE_DIM;
+use egoexo_core::foot_contact::{FOOT_JOINT_ABOVE_SOLE_M, FootContactAccumulator, FootContactMetrics};
 use egoexo_core::metrics::{MetricsAccumulator, MotionMetrics};
 use egoexo_infer::baselines::NearestNeighbourIndex;
 use egoexo_infer::inputs::{POSE_DIM, ego_window, window_targets};
@@ -45,6 +46,14 @@ pub struct EvalRow {
     pub metrics: MotionMetrics,
 }
 
+/// A method's feet against the floor.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FootRow {
+    pub method: Method,
+    #[serde(flatten)]
+    pub metrics: FootContactMetrics,
+}
+
 /// The result, in the shape `egoexo eval --json` prints.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EvalReport {
@@ -62,6 +71,13 @@ pub struct EvalReport {
     /// over-smoothed motion, above it shaky motion. `None` when no segment has 4 frames.
     pub ground_truth: Option<MotionMetrics>,
     pub occluded_ground_truth: Option<MotionMetrics>,
+    /// Feet against the simulated floor per method ([`egoexo_core::foot_contact`]): how far
+    /// they go through it and how much they slide while standing on it.
+    #[serde(default)]
+    pub feet: Vec<FootRow>,
+    /// The true motion's feet on the same frames (its skating is the foot's own roll).
+    #[serde(default)]
+    pub ground_truth_feet: Option<FootContactMetrics>,
     /// Clip-paired comparisons between the networks' rows ([`COMPARED_METHODS`]), on all and
     /// on occluded frames; empty without networks.
     #[serde(default)]
@@ -224,6 +240,8 @@ pub fn evaluate(
     }
     let mut all: Vec<MetricsAccumulator> = options.methods.iter().map(|_| MetricsAccumulator::new()).collect();
     let mut occluded: Vec<MetricsAccumulator> = options.methods.iter().map(|_| MetricsAccumulator::new()).collect();
+    let mut feet: Vec<FootContactAccumulator> = options.methods.iter().map(|_| FootContactAccumulator::new()).collect();
+    let mut truth_feet = FootContactAccumulator::new();
     let (mut truth, mut occluded_truth) = (MetricsAccumulator::new(), MetricsAccumulator::new());
     let mut per_clip: Vec<ClipMetrics> = options.methods.iter().map(|_| Vec::with_capacity(clips.len())).collect();
     let (mut frames, mut occluded_frames) = (0, 0);
@@ -244,11 +262,17 @@ pub fn evaluate(
         frames += segments.iter().map(|s| s.len()).sum::<usize>();
         occluded_frames +=
             segments.iter().map(|s| hidden[s.frames.clone()].iter().filter(|&&h| h).count()).sum::<usize>();
+        // The simulator's floor; soles sit below the foot joints in proportion to the body.
+        let floor_y =
+            aligned.floor_y.ok_or_else(|| DatasetError::Options("a simulated session without a floor".into()))?;
+        let sole_offset = FOOT_JOINT_ABOVE_SOLE_M * aligned.skeleton.head_height()
+            / egoexo_core::skeleton::SmplSkeleton::mean_shape().head_height();
         for segment in &segments {
             let range = segment.frames.clone();
             let (joints, fps) = (&gt_joints[range.clone()], aligned.timeline.fps);
             truth.add_segment(joints, joints, fps, None)?;
             occluded_truth.add_segment(joints, joints, fps, Some(&hidden[range]))?;
+            truth_feet.add_segment(joints, joints, fps, floor_y, sole_offset);
         }
         // Methods sharing a coarse pose share one ego pass (EgoNet once per window).
         let reconstructions =
@@ -266,6 +290,7 @@ pub fn evaluate(
                 for acc in [&mut occluded[m], &mut clip_occluded] {
                     acc.add_segment(pred, truth, fps, Some(&hidden[range.clone()]))?;
                 }
+                feet[m].add_segment(pred, truth, fps, floor_y, sole_offset);
             }
             per_clip[m].push([clip_all.finish(), clip_occluded.finish()]);
         }
@@ -290,6 +315,13 @@ pub fn evaluate(
         occluded_rows: rows(&occluded),
         ground_truth: truth.finish(),
         occluded_ground_truth: occluded_truth.finish(),
+        feet: options
+            .methods
+            .iter()
+            .zip(&feet)
+            .filter_map(|(&method, acc)| acc.finish().map(|metrics| FootRow { method, metrics }))
+            .collect(),
+        ground_truth_feet: truth_feet.finish(),
         paired: paired_comparisons(&options.methods, &per_clip, options.seed),
     })
 }
@@ -333,6 +365,21 @@ pub fn format_table(report: &EvalReport) -> String {
             out.push_str(&format!(
                 "{:<20} {dash:>8} {dash:>8} {dash:>8} {dash:>11} {:>8.2}\n",
                 "(ground truth)", truth.jitter
+            ));
+        }
+    }
+    if !report.feet.is_empty() {
+        out.push_str("\nfeet and floor (all frames)\n");
+        out.push_str(&format!(
+            "{:<20} {:>12} {:>12} {:>10}\n{:<20} {:>12} {:>12} {:>10}\n",
+            "method", "penetration", "worst", "skating", "", "cm (mean)", "cm", "cm/s"
+        ));
+        let truth = report.ground_truth_feet.map(|m| ("(ground truth)", m));
+        for (name, m) in report.feet.iter().map(|r| (r.method.name(), r.metrics)).chain(truth) {
+            let skating = m.skating_cm_s.map_or("-".to_owned(), |s| format!("{s:.2}"));
+            out.push_str(&format!(
+                "{name:<20} {:>12.2} {:>12.2} {skating:>10}\n",
+                m.penetration_mean_cm, m.penetration_worst_cm
             ));
         }
     }

@@ -217,7 +217,22 @@ fn evaluation_scores_every_method_on_all_and_occluded_frames() {
     assert_ne!(truth.jitter, rest.metrics.jitter);
     // Same seed, same numbers.
     assert_eq!(report, evaluate(&lib, &engine, &options, &mut |_, _| {}).unwrap());
+    // Feet against the simulator's floor: the truth stands on it (never through it, little
+    // sliding while it stands), every method gets a row.
+    assert_eq!(report.feet.iter().map(|r| r.method).collect::<Vec<_>>(), methods);
+    let truth_feet = report.ground_truth_feet.expect("the truth's feet");
+    assert_eq!(truth_feet.penetration_worst_cm, 0.0);
+    let truth_skating = truth_feet.skating_cm_s.expect("a walk stands on its feet");
+    assert!(truth_skating < 25.0, "{truth_feet:?}");
+    for row in &report.feet {
+        assert!(
+            row.metrics.penetration_mean_cm >= 0.0
+                && row.metrics.penetration_worst_cm >= row.metrics.penetration_mean_cm
+        );
+        assert_eq!(row.metrics.contact_pairs, truth_feet.contact_pairs, "stance comes from the truth");
+    }
     let table = format_table(&report);
+    assert!(table.contains("feet and floor") && table.contains("skating"), "{table}");
     assert!(table.contains("occluded frames") && table.contains("ego-exo-ungated"), "{table}");
     assert!(table.contains("(ground truth)"), "{table}");
     let json = serde_json::to_value(&report).unwrap();

@@ -29,8 +29,7 @@ pub const MIN_FLOOR_POINTS: u64 = 50;
 pub const MIN_EYE_HEIGHT_M: f32 = 0.9;
 /// Highest standing glasses height above the floor searched, metres.
 pub const MAX_EYE_HEIGHT_M: f32 = 2.3;
-/// Height of the ankle/foot joints above the soles for the mean shape, metres.
-pub const FOOT_JOINT_ABOVE_SOLE_M: f32 = 0.03;
+pub use egoexo_core::foot_contact::{FOOT_JOINT_ABOVE_SOLE_M, FOOT_JOINTS};
 /// Percentile of the head's heights taken as its standing height.
 pub const STANDING_PERCENTILE: f32 = 0.95;
 
@@ -170,7 +169,7 @@ pub fn floor_from_ground_truth(motion: &egoexo_core::motion::SmplMotion) -> Opti
         .step_by(stride)
         .map(|p| {
             let fk = motion.skeleton.forward_kinematics(p);
-            [7, 8, 10, 11].map(|j| fk.positions[j].y).into_iter().fold(f32::INFINITY, f32::min)
+            FOOT_JOINTS.iter().map(|&j| fk.positions[j].y).fold(f32::INFINITY, f32::min)
         })
         .filter(|y| y.is_finite())
         .collect();

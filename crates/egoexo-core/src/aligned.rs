@@ -45,6 +45,26 @@ pub struct AlignedTrajectory {
     pub valid: Vec<bool>,
 }
 
+impl AlignedTrajectory {
+    /// How much of the timeline it covers: the tracked fraction of frames and the longest run
+    /// of untracked frames.
+    pub fn coverage(&self) -> TrackCoverage {
+        TrackCoverage {
+            tracked_fraction: self.valid.iter().filter(|&&v| v).count() as f32 / self.valid.len().max(1) as f32,
+            longest_gap_frames: longest_gap_frames(&self.valid),
+        }
+    }
+}
+
+/// What [`AlignedTrajectory::coverage`] reports.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrackCoverage {
+    /// Tracked frames / timeline frames, in [0, 1].
+    pub tracked_fraction: f32,
+    /// The longest run of untracked frames.
+    pub longest_gap_frames: usize,
+}
+
 /// One observer on the timeline.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AlignedObserver {

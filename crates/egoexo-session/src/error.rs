@@ -152,6 +152,25 @@ pub(crate) fn quote(text: &str, max: usize) -> String {
     format!("`{out}`")
 }
 
+/// `t_ns` must come strictly after `previous` (the last timestamp read, if any): a duplicate
+/// or a step back is an error at `at`, built only then.
+pub(crate) fn check_strictly_after(
+    file: &str,
+    at: impl FnOnce() -> Location,
+    previous: Option<i64>,
+    t_ns: i64,
+) -> Result<(), ImportError> {
+    match previous {
+        Some(previous) if t_ns == previous => {
+            Err(ImportError::new(file, at(), ImportErrorKind::DuplicateTimestamp(t_ns)))
+        }
+        Some(previous) if t_ns < previous => {
+            Err(ImportError::new(file, at(), ImportErrorKind::NonMonotonicTimestamp { previous, got: t_ns }))
+        }
+        _ => Ok(()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -513,13 +513,12 @@ fn wrist_summaries(session: &egoexo_session::Session, aligned: &AlignedSession) 
     [("left", &aligned.left_wrist), ("right", &aligned.right_wrist)]
         .into_iter()
         .filter_map(|(side, w)| {
-            let w = w.as_ref()?;
-            let frames = w.valid.len().max(1);
+            let coverage = w.as_ref()?.coverage();
             Some(WristSummary {
                 side: side.into(),
                 source: session.wearer.wrist_source.describe(),
-                tracked_percent: w.valid.iter().filter(|&&v| v).count() as f32 * 100.0 / frames as f32,
-                longest_gap_s: egoexo_core::aligned::longest_gap_frames(&w.valid) as f32 / aligned.timeline.fps,
+                tracked_percent: coverage.tracked_fraction * 100.0,
+                longest_gap_s: coverage.longest_gap_frames as f32 / aligned.timeline.fps,
             })
         })
         .collect()

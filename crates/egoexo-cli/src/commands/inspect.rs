@@ -4,7 +4,7 @@
 use std::fmt::Write as _;
 
 use anyhow::{Context, Result};
-use egoexo_core::aligned::{AlignedSession, longest_gap_frames};
+use egoexo_core::aligned::AlignedSession;
 use egoexo_core::camera::Projection;
 use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
 use egoexo_session::align::{AlignOptions, align};
@@ -92,11 +92,11 @@ fn wrist_coverage(aligned: &AlignedSession) -> Vec<WristCoverage> {
     [("left", &aligned.left_wrist), ("right", &aligned.right_wrist)]
         .into_iter()
         .filter_map(|(side, w)| {
-            let w = w.as_ref()?;
+            let coverage = w.as_ref()?.coverage();
             Some(WristCoverage {
                 side,
-                percent: 100.0 * w.valid.iter().filter(|&&v| v).count() as f64 / w.valid.len().max(1) as f64,
-                longest_gap_s: longest_gap_frames(&w.valid) as f64 / f64::from(aligned.timeline.fps),
+                percent: 100.0 * f64::from(coverage.tracked_fraction),
+                longest_gap_s: coverage.longest_gap_frames as f64 / f64::from(aligned.timeline.fps),
             })
         })
         .collect()

@@ -30,7 +30,7 @@ use egoexo_core::rigid::RigidTransform;
 use serde::{Deserialize, Serialize};
 
 use super::trajectory::QUATERNION_NORM_TOLERANCE;
-use crate::error::{ImportError, ImportErrorKind, Location, quote};
+use crate::error::{ImportError, ImportErrorKind, Location, check_strictly_after, quote};
 
 /// `wrist_and_palm_poses.csv`.
 pub const WRIST_AND_PALM_FILE: &str = "wrist_and_palm_poses.csv";
@@ -278,18 +278,7 @@ pub fn read_hand_tracking(file: &str, reader: impl std::io::Read) -> Result<Hand
         let t_ns = t_us.checked_mul(1000).ok_or_else(|| {
             ImportError::invalid(file, at(time_column), "a timestamp that fits in i64 nanoseconds", raw_time.to_owned())
         })?;
-        if let Some(previous) = previous {
-            if t_ns == previous {
-                return Err(ImportError::new(file, at(time_column), ImportErrorKind::DuplicateTimestamp(t_ns)));
-            }
-            if t_ns < previous {
-                return Err(ImportError::new(
-                    file,
-                    at(time_column),
-                    ImportErrorKind::NonMonotonicTimestamp { previous, got: t_ns },
-                ));
-            }
-        }
+        check_strictly_after(file, || at(time_column), previous, t_ns)?;
         previous = Some(t_ns);
         for (hand, samples) in hands.iter().zip([&mut out.left, &mut out.right]) {
             let confidence = number(hand.confidence)?;

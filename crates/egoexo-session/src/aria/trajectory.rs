@@ -26,7 +26,7 @@ use std::fmt::Write as _;
 use egoexo_core::glam::{Quat, Vec3};
 use egoexo_core::rigid::RigidTransform;
 
-use crate::error::{ImportError, ImportErrorKind, Location, quote};
+use crate::error::{ImportError, ImportErrorKind, Location, check_strictly_after, quote};
 
 /// Which timestamp column gives the time of a pose.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -215,18 +215,7 @@ pub fn read_closed_loop_trajectory(
                 raw_time.to_owned(),
             )
         })?;
-        if let Some(&previous) = out.timestamps_ns.last() {
-            if t_ns == previous {
-                return Err(ImportError::new(file, at(time_column), ImportErrorKind::DuplicateTimestamp(t_ns)));
-            }
-            if t_ns < previous {
-                return Err(ImportError::new(
-                    file,
-                    at(time_column),
-                    ImportErrorKind::NonMonotonicTimestamp { previous, got: t_ns },
-                ));
-            }
-        }
+        check_strictly_after(file, || at(time_column), out.timestamps_ns.last().copied(), t_ns)?;
 
         let mut values = [0f64; 7];
         for (value, &c) in values.iter_mut().zip(&pose_columns) {

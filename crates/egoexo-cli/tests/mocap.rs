@@ -126,3 +126,44 @@ fn bad_inputs_are_errors_naming_the_file() {
     assert_eq!(info["clip_list"][0]["name"], "07_01");
     assert_eq!(info["clips"], 1);
 }
+
+/// The shared subset and `cmu-extra` in one library: two folders on the command line, the
+/// three cgspeed BVH releases beside ASF/AMC, the retarget error printed and stored per
+/// source.
+#[test]
+fn import_of_two_folders_reports_each_source() {
+    let (Some(cmu), Some(extra)) = (cmu_dir(), egoexo_test_support::cmu_extra_dir()) else { return };
+    let root = scratch("mocap_cli_extra");
+    let lib = root.join("all.safetensors");
+    let out = egoexo(&[
+        "mocap",
+        "import",
+        cmu.to_str().unwrap(),
+        extra.to_str().unwrap(),
+        "--subjects",
+        "2,11,12,131",
+        "-o",
+        lib.to_str().unwrap(),
+    ]);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "import failed: {stdout}{}", text(&out.stderr));
+    assert!(stdout.contains("of 4 subjects"), "{stdout}");
+    for source in ["ASF/AMC", "BVH (cgspeed 3dsMax)", "BVH (cgspeed DAZ, standard figure)"] {
+        assert!(stdout.lines().any(|l| l.starts_with(source)), "no row for {source}:\n{stdout}");
+    }
+    assert!(stdout.contains("restored the collapsed thorax"), "{stdout}");
+
+    let out = egoexo(&["mocap", "info", lib.to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let info: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(info["subjects"], serde_json::json!([2, 11, 12, 131]));
+    let sources = info["per_source"].as_array().unwrap();
+    let find = |name: &str| sources.iter().find(|s| s["source"] == name).unwrap_or_else(|| panic!("{name}"));
+    assert_eq!(find("ASF/AMC")["subjects"], serde_json::json!([2, 11, 131]));
+    assert_eq!(find("BVH (cgspeed 3dsMax)")["subjects"], serde_json::json!([131]));
+    assert_eq!(find("BVH (cgspeed DAZ, standard figure)")["subjects"], serde_json::json!([12]));
+    for s in sources {
+        let mean = s["retarget_mean_cm"].as_f64().unwrap();
+        assert!(mean > 0.5 && mean < 3.5, "{s}");
+    }
+}

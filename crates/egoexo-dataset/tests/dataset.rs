@@ -30,6 +30,7 @@ fn library() -> MotionLibrary {
                     segment: 0,
                     description: "walking a circle (procedural)".into(),
                     source_fps: 30.0,
+                    source_format: "procedural".into(),
                     source_frames: motion.len() as u32,
                     source_range: [0, motion.len() as u32],
                     frames: 0,

@@ -3,9 +3,12 @@
 //!
 //! The file is read by the project's one BVH reader ([`egoexo_motion_io::bvh`]). Each BVH joint
 //! of such a conversion sits where the ASF bone of the same role starts, so the joints are
-//! matched to ASF bone names ([`CMU_BVH_JOINTS`]; a file may also use the ASF names
-//! themselves) and the rest of the import is the ASF/AMC one: the same joint map, retarget,
-//! corrupt-frame trimming and resampling. Interpolation between frames slerps each joint's
+//! matched to ASF bone names by the naming the file's joints reveal ([`CmuBvhNaming`]:
+//! cgspeed's MotionBuilder, 3dsMax and DAZ releases, or the ASF names themselves) and the
+//! rest of the import is the ASF/AMC one: the same joint map, retarget, corrupt-frame
+//! trimming and resampling. Two quirks of the cgspeed releases are undone first: leading
+//! reference-pose rows ([`leading_reference_rows`]) are left out, and a collapsed thorax is
+//! restored ([`restore_collapsed_thorax`]); both checked against the AMC of the same trial. Interpolation between frames slerps each joint's
 //! local rotation and lerps its translation.
 //!
 //! Frames and units: BVH joint frames are taken as aligned with the world in the rest pose
@@ -15,15 +18,15 @@
 //! file's `Frame Time` (conversions wrote 120 fps even for the 60 Hz subjects).
 
 use egoexo_core::glam::{DQuat, DVec3, Quat};
-use egoexo_motion_io::bvh::{Bvh, BvhPose};
+use egoexo_motion_io::bvh::{Bvh, BvhError, BvhPose};
 
 use crate::catalog::CatalogEntry;
 use crate::import::{ImportError, ImportOptions, TrialImport, TrialSource, clips_from_source};
 use crate::kinematics::CmuBoneTransforms;
 use crate::retarget::{CmuJointMap, Retargeter, standing_head_height};
 
-/// ASF bone name → joint name in the CMU BVH conversions. The joint is placed where the bone
-/// starts.
+/// ASF bone name → joint name in cgspeed's "MotionBuilder-friendly" CMU conversions (and
+/// `cmuconvert`'s). The joint is placed where the bone starts.
 pub const CMU_BVH_JOINTS: [(&str, &str); 31] = [
     ("root", "Hips"),
     ("lhipjoint", "LHipJoint"),
@@ -58,6 +61,170 @@ pub const CMU_BVH_JOINTS: [(&str, &str); 31] = [
     ("rthumb", "RThumb"),
 ];
 
+/// ASF bone name → joint name in cgspeed's "3dsMax-friendly" release (same skeleton as the
+/// MotionBuilder one, other names; its `LHipJoint`/`RHipJoint` have zero offsets, their
+/// children carry the hip vector).
+pub const CGSPEED_MAX_JOINTS: [(&str, &str); 31] = [
+    ("root", "Hips"),
+    ("lhipjoint", "LHipJoint"),
+    ("lfemur", "LeftHip"),
+    ("ltibia", "LeftKnee"),
+    ("lfoot", "LeftAnkle"),
+    ("ltoes", "LeftToe"),
+    ("rhipjoint", "RHipJoint"),
+    ("rfemur", "RightHip"),
+    ("rtibia", "RightKnee"),
+    ("rfoot", "RightAnkle"),
+    ("rtoes", "RightToe"),
+    ("lowerback", "lowerback"),
+    ("upperback", "Chest"),
+    ("thorax", "Chest2"),
+    ("lowerneck", "lowerneck"),
+    ("upperneck", "Neck"),
+    ("head", "Head"),
+    ("lclavicle", "LeftCollar"),
+    ("lhumerus", "LeftShoulder"),
+    ("lradius", "LeftElbow"),
+    ("lwrist", "LeftWrist"),
+    ("lhand", "lhand"),
+    ("lfingers", "LFingers"),
+    ("lthumb", "LThumb"),
+    ("rclavicle", "RightCollar"),
+    ("rhumerus", "RightShoulder"),
+    ("rradius", "RightElbow"),
+    ("rwrist", "RightWrist"),
+    ("rhand", "rhand"),
+    ("rfingers", "RFingers"),
+    ("rthumb", "RThumb"),
+];
+
+/// ASF bone name → joint name in cgspeed's "DAZ-friendly" release: one standard DAZ figure
+/// (43 joints, root `hip`), not the subject's skeleton. It has no toe joint and one neck
+/// joint: the toes are the foot's end site (`"lFoot end"`, see [`END_SITE_SUFFIX`]) and both
+/// CMU neck bones start at `neck`; the CMU hand bone (wrist → knuckles) starts at the middle
+/// finger's first joint.
+pub const CGSPEED_DAZ_JOINTS: [(&str, &str); 27] = [
+    ("root", "hip"),
+    ("lhipjoint", "lButtock"),
+    ("lfemur", "lThigh"),
+    ("ltibia", "lShin"),
+    ("lfoot", "lFoot"),
+    ("ltoes", "lFoot end"),
+    ("rhipjoint", "rButtock"),
+    ("rfemur", "rThigh"),
+    ("rtibia", "rShin"),
+    ("rfoot", "rFoot"),
+    ("rtoes", "rFoot end"),
+    ("upperback", "abdomen"),
+    ("thorax", "chest"),
+    ("lowerneck", "neck"),
+    ("upperneck", "neck"),
+    ("head", "head"),
+    ("lclavicle", "lCollar"),
+    ("lhumerus", "lShldr"),
+    ("lradius", "lForeArm"),
+    ("lwrist", "lHand"),
+    ("lhand", "lMid1"),
+    ("rclavicle", "rCollar"),
+    ("rhumerus", "rShldr"),
+    ("rradius", "rForeArm"),
+    ("rwrist", "rHand"),
+    ("rhand", "rMid1"),
+    ("lthumb", "lThumb1"),
+];
+
+/// A joint's end site is addressed as `"{joint name}{END_SITE_SUFFIX}"`; its bone index
+/// follows every joint's (see [`joint_for_bone`]).
+pub const END_SITE_SUFFIX: &str = " end";
+
+/// Which family of CMU BVH conversion a file is, by its joint names.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum CmuBvhNaming {
+    /// cgspeed "MotionBuilder-friendly" (root `Hips`, `LeftUpLeg`, `Spine1`, …), per-subject
+    /// bone lengths; also `cmuconvert`.
+    CgspeedMotionBuilder,
+    /// cgspeed "3dsMax-friendly" (root `Hips`, `LeftHip`, `Chest2`, …), per-subject bone
+    /// lengths.
+    Cgspeed3dsMax,
+    /// cgspeed "DAZ-friendly" (root `hip`, `lThigh`, `abdomen`, …): one standard figure.
+    CgspeedDaz,
+    /// The ASF bone names themselves.
+    AsfNames,
+}
+
+impl CmuBvhNaming {
+    /// Every naming, in the order [`CmuBvhNaming::detect`] tries them.
+    pub const ALL: [CmuBvhNaming; 4] = [
+        CmuBvhNaming::CgspeedMotionBuilder,
+        CmuBvhNaming::Cgspeed3dsMax,
+        CmuBvhNaming::CgspeedDaz,
+        CmuBvhNaming::AsfNames,
+    ];
+
+    /// ASF bone → BVH joint names (empty for [`CmuBvhNaming::AsfNames`]).
+    pub fn table(self) -> &'static [(&'static str, &'static str)] {
+        match self {
+            CmuBvhNaming::CgspeedMotionBuilder => &CMU_BVH_JOINTS,
+            CmuBvhNaming::Cgspeed3dsMax => &CGSPEED_MAX_JOINTS,
+            CmuBvhNaming::CgspeedDaz => &CGSPEED_DAZ_JOINTS,
+            CmuBvhNaming::AsfNames => &[],
+        }
+    }
+
+    /// How the data source is named in libraries and reports
+    /// ([`crate::library::ClipInfo::source_format`]).
+    pub fn source_format(self) -> &'static str {
+        match self {
+            CmuBvhNaming::CgspeedMotionBuilder => "BVH (cgspeed MotionBuilder)",
+            CmuBvhNaming::Cgspeed3dsMax => "BVH (cgspeed 3dsMax)",
+            CmuBvhNaming::CgspeedDaz => "BVH (cgspeed DAZ, standard figure)",
+            CmuBvhNaming::AsfNames => "BVH (ASF joint names)",
+        }
+    }
+
+    /// The bone index (see [`joint_for_bone`]) playing ASF bone `bone` under this naming.
+    pub fn bone_index(self, bvh: &Bvh, bone: &str) -> Option<usize> {
+        let name = match self {
+            CmuBvhNaming::AsfNames => bone,
+            _ => self.table().iter().find(|(asf, _)| *asf == bone).map(|(_, b)| *b)?,
+        };
+        joint_for_bone(bvh, name)
+    }
+
+    /// The first naming under which every bone the CMU→SMPL mapping needs is present.
+    pub fn detect(bvh: &Bvh) -> Option<CmuBvhNaming> {
+        Self::ALL.into_iter().find(|naming| CmuJointMap::new(|bone| naming.bone_index(bvh, bone)).is_ok())
+    }
+}
+
+/// Bone index of the BVH joint named `name` (ASCII case-insensitive, surrounding spaces
+/// ignored), or — for `"{joint}{END_SITE_SUFFIX}"` — of that joint's end site: end sites
+/// are numbered after all joints, in joint order.
+pub fn joint_for_bone(bvh: &Bvh, name: &str) -> Option<usize> {
+    let find = |name: &str| bvh.joints().iter().position(|j| j.name.trim().eq_ignore_ascii_case(name));
+    if let Some(j) = find(name) {
+        return Some(j);
+    }
+    let joint = find(name.strip_suffix(END_SITE_SUFFIX)?)?;
+    bvh.joints()[joint].end_site?;
+    let before = bvh.joints()[..joint].iter().filter(|j| j.end_site.is_some()).count();
+    Some(bvh.joints().len() + before)
+}
+
+/// How many leading rows hold a reference pose rather than motion: rows whose rotation
+/// channels are all whole numbers of degrees (hand-set poses; captured motion has
+/// fractions), before the first row that is not. cgspeed's MotionBuilder release prepends a
+/// T-pose to every trial (07_12 also a zero row after it). 0 when no row has fractions.
+pub fn leading_reference_rows(bvh: &Bvh) -> usize {
+    let rotations_whole = |frame: usize| {
+        bvh.joints().iter().enumerate().all(|(j, joint)| {
+            let values = bvh.joint_values(j, frame).unwrap_or(&[]);
+            joint.channels.iter().zip(values).all(|(c, v)| !c.is_rotation() || (v - v.round()).abs() < 1e-6)
+        })
+    };
+    (0..bvh.num_frames()).position(|f| !rotations_whole(f)).unwrap_or_default()
+}
+
 /// Units a BVH file may plausibly use, metres per unit.
 pub const CANDIDATE_UNITS: [(&str, f64); 5] = [
     ("metres", 1.0),
@@ -67,15 +234,35 @@ pub const CANDIDATE_UNITS: [(&str, f64); 5] = [
     ("CMU units (1/0.45 inch)", 0.0254 / 0.45),
 ];
 
-/// The BVH joint playing ASF bone `bone`: by its CMU-BVH name, else by the ASF name itself
-/// (ASCII case-insensitive).
-pub fn joint_for_bone(bvh: &Bvh, bone: &str) -> Option<usize> {
-    let bvh_name = CMU_BVH_JOINTS.iter().find(|(asf, _)| *asf == bone).map(|(_, b)| *b);
-    let find = |name: &str| bvh.joints().iter().position(|j| j.name.trim().eq_ignore_ascii_case(name));
-    bvh_name.and_then(find).or_else(|| find(bone))
+/// cgspeed's MotionBuilder and 3dsMax releases drop the CMU thorax bone's length: the neck
+/// and both collars start where the thorax starts (`Spine1`/`Chest2` with zero offsets), so
+/// the head sits ~11 cm low on the hips and the subject comes out ~8 % short. CMU subjects'
+/// thorax is as long as their upper back (ratio 1.00–1.04 over the 16 ASFs in
+/// `shared/data`) and points straight up in the rest pose (within 8°), so the lost length is
+/// restored as the thorax joint's own offset length along its +Y. Returns the length
+/// restored (file units) when the file had the collapse, `None` otherwise.
+pub fn restore_collapsed_thorax(bvh: Bvh, naming: CmuBvhNaming) -> Result<(Bvh, Option<f64>), BvhError> {
+    let (Some(thorax), Some(neck)) = (naming.bone_index(&bvh, "thorax"), naming.bone_index(&bvh, "lowerneck")) else {
+        return Ok((bvh, None));
+    };
+    let joints = bvh.joints();
+    let collapsed = neck < joints.len() && joints[neck].parent == Some(thorax) && joints[neck].offset.length() < 1e-9;
+    if !collapsed {
+        return Ok((bvh, None));
+    }
+    let length = joints[thorax].offset.length();
+    if length <= 0.0 {
+        return Ok((bvh, None));
+    }
+    let (mut joints, frame_time_s, values) = bvh.into_parts();
+    for joint in joints.iter_mut().filter(|j| j.parent == Some(thorax) && j.offset.length() < 1e-9) {
+        joint.offset = DVec3::new(0.0, length, 0.0);
+    }
+    Ok((Bvh::new(joints, frame_time_s, values)?, Some(length)))
 }
 
-/// World transforms of the rest pose (every rotation the identity), file units.
+/// World transforms of the rest pose (every rotation the identity), file units, indexed as
+/// [`joint_for_bone`] numbers bones (joints, then end sites).
 fn rest_transforms(bvh: &Bvh) -> CmuBoneTransforms {
     let mut out = CmuBoneTransforms::default();
     let mut world: Vec<DVec3> = Vec::with_capacity(bvh.joints().len());
@@ -83,6 +270,9 @@ fn rest_transforms(bvh: &Bvh) -> CmuBoneTransforms {
         let p = joint.parent.and_then(|p| world.get(p).copied()).unwrap_or(DVec3::ZERO) + joint.offset;
         world.push(p);
     }
+    let end_sites: Vec<DVec3> =
+        bvh.joints().iter().zip(&world).filter_map(|(joint, p)| joint.end_site.map(|e| *p + e)).collect();
+    world.extend(end_sites);
     out.starts = world.iter().map(|p| p.as_vec3()).collect();
     out.ends = out.starts.clone();
     out.rotations = vec![Quat::IDENTITY; world.len()];
@@ -111,9 +301,13 @@ pub fn import_bvh_trial(
     entry: &CatalogEntry,
     options: &ImportOptions,
 ) -> Result<TrialImport, ImportError> {
-    let bvh = Bvh::parse(text).map_err(|source| ImportError::Bvh { file: file.to_owned(), source })?;
+    let bvh_error = |source| ImportError::Bvh { file: file.to_owned(), source };
+    let bvh = Bvh::parse(text).map_err(bvh_error)?;
     let retarget_error = |source| ImportError::Retarget { file: file.to_owned(), source };
-    let lookup = |bone: &str| joint_for_bone(&bvh, bone);
+    // A file of no known naming fails on the first missing bone under the CMU names.
+    let naming = CmuBvhNaming::detect(&bvh).unwrap_or(CmuBvhNaming::CgspeedMotionBuilder);
+    let (bvh, restored_thorax) = restore_collapsed_thorax(bvh, naming).map_err(bvh_error)?;
+    let lookup = |bone: &str| naming.bone_index(&bvh, bone);
     let rest_units = rest_transforms(&bvh);
     let unit = match options.bvh_metres_per_unit {
         Some(u) if u.is_finite() && u > 0.0 => u,
@@ -134,12 +328,17 @@ pub fn import_bvh_trial(
     let retargeter = Retargeter::from_rest(lookup, &rest).map_err(retarget_error)?;
 
     let joints = bvh.joints();
-    let frames = bvh.num_frames();
+    // Skip a prepended reference pose: it is not motion, and the jump out of it would be
+    // trimmed as a glitch anyway.
+    let first_frame = leading_reference_rows(&bvh);
+    let frames = bvh.num_frames() - first_frame;
     let mut local_a: Vec<BvhPose> = Vec::with_capacity(joints.len());
     let mut local_b: Vec<BvhPose> = Vec::with_capacity(joints.len());
     let mut world: Vec<(DVec3, DQuat)> = Vec::with_capacity(joints.len());
-    let source = TrialSource { subject, trial, file, entry };
-    clips_from_source(&retargeter, &source, options, frames, |i, alpha, out| {
+    let source =
+        TrialSource { subject, trial, file, entry, format: naming.source_format(), first_source_frame: first_frame };
+    let mut import = clips_from_source(&retargeter, &source, options, frames, |i, alpha, out| {
+        let i = i + first_frame;
         local_a.clear();
         local_b.clear();
         world.clear();
@@ -171,8 +370,18 @@ pub fn import_bvh_trial(
             out.starts.push((pose.0 * unit).as_vec3());
             out.rotations.push(pose.1.as_quat());
         }
+        // End sites, after every joint (the numbering of `joint_for_bone`).
+        for (joint, &(p, r)) in joints.iter().zip(&world) {
+            if let Some(end) = joint.end_site {
+                out.starts.push(((p + r * end) * unit).as_vec3());
+                out.rotations.push(r.as_quat());
+            }
+        }
         out.ends.clone_from(&out.starts);
-    })
+    })?;
+    import.reference_rows_skipped = first_frame;
+    import.restored_thorax_m = restored_thorax.map(|l| (l * unit) as f32);
+    Ok(import)
 }
 
 #[cfg(test)]

@@ -31,7 +31,8 @@ pub struct SubjectFiles {
 /// CMU files found below a folder.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct CmuTree {
-    pub root: PathBuf,
+    /// The folders searched, in the order given.
+    pub roots: Vec<PathBuf>,
     /// The shallowest `CMU_data.csv`, if any.
     pub catalog: Option<PathBuf>,
     /// Subjects with an ASF, ascending.
@@ -43,6 +44,11 @@ pub struct CmuTree {
 }
 
 impl CmuTree {
+    /// The searched folders, comma-separated (for messages).
+    pub fn display_roots(&self) -> String {
+        self.roots.iter().map(|r| r.display().to_string()).collect::<Vec<_>>().join(", ")
+    }
+
     /// Number of trials (AMC and BVH).
     pub fn trial_count(&self) -> usize {
         self.subjects.iter().map(|s| s.trials.len()).sum::<usize>() + self.bvh_trials.len()
@@ -75,7 +81,15 @@ fn has_extension(path: &Path, ext: &str) -> bool {
 
 /// Finds the CMU subjects, trials and catalogue below `root`.
 pub fn scan_cmu_tree(root: &Path) -> Result<CmuTree, ImportError> {
-    let mut folders: Vec<(usize, PathBuf)> = vec![(0, root.to_path_buf())];
+    scan_cmu_trees(&[root.to_path_buf()])
+}
+
+/// Finds the CMU subjects, trials and catalogue below each of `roots`, as one tree (e.g. the
+/// shared subset and `cmu-extra`). A subject's ASF found twice is used from the first root;
+/// a trial present as AMC anywhere is never imported from BVH.
+pub fn scan_cmu_trees(roots: &[PathBuf]) -> Result<CmuTree, ImportError> {
+    // A stack: the last folder pushed is searched first, so push the roots in reverse.
+    let mut folders: Vec<(usize, PathBuf)> = roots.iter().rev().map(|r| (0, r.clone())).collect();
     let mut catalog: Option<(usize, PathBuf)> = None;
     let mut subjects: Vec<SubjectFiles> = Vec::new();
     let mut ignored = Vec::new();
@@ -160,9 +174,10 @@ pub fn scan_cmu_tree(root: &Path) -> Result<CmuTree, ImportError> {
         }
     }
     if subjects.is_empty() && kept_bvh.is_empty() {
-        return Err(ImportError::EmptyTree(root.display().to_string()));
+        let names: Vec<String> = roots.iter().map(|r| r.display().to_string()).collect();
+        return Err(ImportError::EmptyTree(names.join(", ")));
     }
-    Ok(CmuTree { root: root.to_path_buf(), catalog: catalog.map(|(_, p)| p), subjects, bvh_trials: kept_bvh, ignored })
+    Ok(CmuTree { roots: roots.to_vec(), catalog: catalog.map(|(_, p)| p), subjects, bvh_trials: kept_bvh, ignored })
 }
 
 /// Reads text that should be ASCII; stray non-UTF-8 bytes (in comments, file paths of the
@@ -198,6 +213,10 @@ pub struct TreeImport {
     pub trials: usize,
     /// Per trial that lost frames to glitches: `(path, source frames, dropped frames)`.
     pub trimmed: Vec<(PathBuf, usize, usize)>,
+    /// BVH trials whose prepended reference pose (T-pose row) was left out.
+    pub reference_rows_skipped: Vec<PathBuf>,
+    /// BVH trials whose collapsed thorax was restored, with the length (m).
+    pub restored_thorax: Vec<(PathBuf, f32)>,
 }
 
 /// Imports every trial of `tree` (or only those of `subjects`) in parallel and builds the
@@ -252,11 +271,19 @@ pub fn import_tree(
 
     let mut clips = Vec::new();
     let mut trimmed = Vec::new();
+    let mut reference_rows_skipped = Vec::new();
+    let mut restored_thorax = Vec::new();
     let mut trials = 0;
     for (path, result) in results {
         match result {
             Ok(import) => {
                 trials += 1;
+                if let Some(length) = import.restored_thorax_m {
+                    restored_thorax.push((path.to_path_buf(), length));
+                }
+                if import.reference_rows_skipped > 0 {
+                    reference_rows_skipped.push(path.to_path_buf());
+                }
                 if import.dropped_frames > 0 {
                     trimmed.push((path.to_path_buf(), import.source_frames, import.dropped_frames));
                 }
@@ -266,8 +293,8 @@ pub fn import_tree(
         }
     }
     let library = MotionLibrary::build(options.fps, CMU_SOURCE, clips)
-        .map_err(|source| ImportError::Library { file: tree.root.display().to_string(), source })?;
-    Ok(TreeImport { library, failures, trials, trimmed })
+        .map_err(|source| ImportError::Library { file: tree.display_roots(), source })?;
+    Ok(TreeImport { library, failures, trials, trimmed, reference_rows_skipped, restored_thorax })
 }
 
 /// Reads a library file.

@@ -21,6 +21,9 @@ pub const LIBRARY_FPS: f32 = 30.0;
 pub const CMU_SOURCE: &str = "The data used in this project was obtained from mocap.cs.cmu.edu. \
      The database was created with funding from NSF EIA-0196217.";
 
+/// [`ClipInfo::source_format`] of clips imported from ASF/AMC.
+pub const ASF_AMC_FORMAT: &str = "ASF/AMC";
+
 /// Settings of an import.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ImportOptions {
@@ -91,6 +94,12 @@ pub struct TrialImport {
     pub dropped_frames: usize,
     /// Number of glitch steps found.
     pub glitches: usize,
+    /// Leading rows that held a reference pose, not motion (cgspeed's prepended T-pose),
+    /// left out before everything else (not counted in `source_frames`).
+    pub reference_rows_skipped: usize,
+    /// Thorax length put back into a BVH conversion that had collapsed it, metres
+    /// ([`crate::bvh::restore_collapsed_thorax`]).
+    pub restored_thorax_m: Option<f32>,
 }
 
 /// Imports the trials of one CMU subject (one ASF skeleton).
@@ -165,7 +174,8 @@ impl SubjectImporter {
         options: &ImportOptions,
     ) -> Result<TrialImport, ImportError> {
         let poses = self.parse_motion(amc_text, file)?;
-        let source = TrialSource { subject: self.subject, trial, file, entry };
+        let source =
+            TrialSource { subject: self.subject, trial, file, entry, format: ASF_AMC_FORMAT, first_source_frame: 0 };
         clips_from_source(&self.retargeter, &source, options, poses.len(), |i, alpha, out| {
             if alpha == 0.0 {
                 self.skeleton.forward_kinematics_into(&poses[i], out);
@@ -182,6 +192,11 @@ pub(crate) struct TrialSource<'a> {
     pub trial: u32,
     pub file: &'a str,
     pub entry: &'a CatalogEntry,
+    /// The data source's kind ([`ClipInfo::source_format`]).
+    pub format: &'static str,
+    /// Source frame index of the first frame handed to [`clips_from_source`] (for
+    /// [`ClipInfo::source_range`]).
+    pub first_source_frame: usize,
 }
 
 /// Corrupt-frame trimming, resampling, retargeting and error statistics for one trial of
@@ -235,8 +250,12 @@ pub(crate) fn clips_from_source(
             segment: segment as u32,
             description: source.entry.description.clone(),
             source_fps,
-            source_frames: frames as u32,
-            source_range: [range.start as u32, range.end as u32],
+            source_format: source.format.to_owned(),
+            source_frames: (frames + source.first_source_frame) as u32,
+            source_range: [
+                (range.start + source.first_source_frame) as u32,
+                (range.end + source.first_source_frame) as u32,
+            ],
             frames: smpl_poses.len() as u32,
             frame_offset: 0,
             head_height_m: retargeter.head_height(),
@@ -245,5 +264,12 @@ pub(crate) fn clips_from_source(
         };
         clips.push(LibraryClip { info, poses: smpl_poses, error_histogram });
     }
-    Ok(TrialImport { clips, source_frames: frames, dropped_frames: frames - kept, glitches })
+    Ok(TrialImport {
+        clips,
+        source_frames: frames,
+        dropped_frames: frames - kept,
+        glitches,
+        reference_rows_skipped: 0,
+        restored_thorax_m: None,
+    })
 }

@@ -71,6 +71,11 @@ pub struct ClipInfo {
     pub description: String,
     /// True capture rate of the source, frames per second (from `CMU_data.csv`).
     pub source_fps: f32,
+    /// The kind of source file: `ASF/AMC` or which BVH conversion
+    /// ([`crate::bvh::CmuBvhNaming::source_format`]). Libraries written before it was
+    /// recorded were all ASF/AMC.
+    #[serde(default = "asf_amc_format")]
+    pub source_format: String,
     /// Frames in the source trial.
     pub source_frames: u32,
     /// Source frames `[start, end)` (0-based) this clip was made from.
@@ -85,6 +90,10 @@ pub struct ClipInfo {
     pub skeleton_scale: f32,
     /// Retarget error.
     pub retarget: RetargetStats,
+}
+
+fn asf_amc_format() -> String {
+    crate::import::ASF_AMC_FORMAT.to_owned()
 }
 
 impl ClipInfo {
@@ -485,6 +494,15 @@ impl MotionLibrary {
         }
         let mean_cm = if samples == 0 { 0.0 } else { (sum_cm / samples as f64) as f32 };
         RetargetSummary { samples, mean_cm, p95_cm: histogram_percentile_cm(&merged, 0.95), max_cm }
+    }
+
+    /// Clip indices grouped by [`ClipInfo::source_format`] (ascending by name).
+    pub fn clips_by_source_format(&self) -> BTreeMap<String, Vec<usize>> {
+        let mut out: BTreeMap<String, Vec<usize>> = BTreeMap::new();
+        for (i, c) in self.header.clips.iter().enumerate() {
+            out.entry(c.source_format.clone()).or_default().push(i);
+        }
+        out
     }
 
     /// Clip indices grouped by subject, subjects ascending.

@@ -260,6 +260,11 @@ impl Bvh {
         Parser::new(text.strip_prefix('\u{feff}').unwrap_or(text)).parse()
     }
 
+    /// The parts [`Bvh::new`] takes: joints, frame time, frame-major values.
+    pub fn into_parts(self) -> (Vec<BvhJoint>, f64, Vec<f64>) {
+        (self.joints, self.frame_time_s, self.values)
+    }
+
     /// The joints in file order.
     pub fn joints(&self) -> &[BvhJoint] {
         &self.joints

@@ -70,6 +70,23 @@ pub fn cmu_dir() -> Option<PathBuf> {
     }
 }
 
+/// The extra CMU subjects (`EGOEXO_CMU_EXTRA_DIR`, else `shared/data/cmu-extra` beside the
+/// repository: ASF/AMC and cgspeed BVH), or `None` with a SKIPPED message when absent.
+pub fn cmu_extra_dir() -> Option<PathBuf> {
+    let dir = std::env::var_os("EGOEXO_CMU_EXTRA_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| workspace_root().join("../shared/data/cmu-extra"));
+    if dir.join("bvh").is_dir() && dir.join("asfamc").is_dir() {
+        Some(dir)
+    } else {
+        eprintln!(
+            "SKIPPED: the extra CMU data is not at {} (set EGOEXO_CMU_EXTRA_DIR to the folder with asfamc/ and bvh/)",
+            dir.display()
+        );
+        None
+    }
+}
+
 /// `len` deterministic pseudo-random bytes (xorshift64 from `seed`): test payloads that do
 /// not compress and differ per seed.
 pub fn pseudo_random_bytes(len: usize, seed: u64) -> Vec<u8> {

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use egoexo_core::skeleton::JOINT_NAMES;
-use egoexo_mocap::fs::{import_tree, open_library, read_catalog, save_library, scan_cmu_tree};
+use egoexo_mocap::fs::{import_tree, open_library, read_catalog, save_library, scan_cmu_trees};
 use egoexo_mocap::{ImportOptions, MotionLibrary};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -19,10 +19,12 @@ pub struct Args {
 enum MocapCommand {
     /// Retarget CMU ASF/AMC motion capture to SMPL and write a motion library (.safetensors).
     ///
-    /// DIR is searched for subject folders holding NN.asf and NN_TT.amc: the project's
+    /// Each DIR is searched for subject folders holding NN.asf and NN_TT.amc: the project's
     /// shared/data/cmu, or CMU's own allasfamc.zip unpacked (all_asfamc/subjects/NN/...).
-    /// Trials in BVH form (NN_TT.bvh, CMU joint names) are imported too.
-    /// Capture rates and descriptions come from CMU_data.csv (found in DIR, or --catalog).
+    /// Trials in BVH form (NN_TT.bvh) are imported too — cgspeed's MotionBuilder, 3dsMax and
+    /// DAZ releases, recognised by their joint names — unless the same trial is there as AMC.
+    /// Capture rates and descriptions come from CMU_data.csv (found in a DIR, or --catalog).
+    /// The retarget error is printed per data source.
     Import(ImportArgs),
     /// Print a library's clips, subjects, hours and retarget error.
     Info(InfoArgs),
@@ -30,8 +32,9 @@ enum MocapCommand {
 
 #[derive(clap::Args)]
 struct ImportArgs {
-    /// Folder with the CMU subject folders.
-    dir: PathBuf,
+    /// Folders with the CMU subject folders (e.g. shared/data/cmu shared/data/cmu-extra).
+    #[arg(required = true)]
+    dirs: Vec<PathBuf>,
     /// The library file to write.
     #[arg(short, long)]
     output: PathBuf,
@@ -68,18 +71,18 @@ pub fn run(args: Args) -> Result<()> {
 
 fn import(args: ImportArgs) -> Result<()> {
     let started = Instant::now();
-    let tree = scan_cmu_tree(&args.dir)?;
+    let tree = scan_cmu_trees(&args.dirs)?;
     let catalog_path = args
         .catalog
         .clone()
         .or_else(|| tree.catalog.clone())
-        .with_context(|| format!("no CMU_data.csv in {}; pass it with --catalog", args.dir.display()))?;
+        .with_context(|| format!("no CMU_data.csv in {}; pass it with --catalog", tree.display_roots()))?;
     let catalog = read_catalog(&catalog_path)?;
     if let Some(wanted) = &args.subjects {
         let present = tree.subject_numbers();
         let missing: Vec<u32> = wanted.iter().copied().filter(|s| !present.contains(s)).collect();
         if !missing.is_empty() {
-            bail!("subjects {missing:?} are not in {}", args.dir.display());
+            bail!("subjects {missing:?} are not in {}", tree.display_roots());
         }
     }
     for (path, why) in &tree.ignored {
@@ -116,6 +119,22 @@ fn import(args: ImportArgs) -> Result<()> {
         library.fps(),
     );
     println!("retarget error: mean {:.2} cm, p95 {:.2} cm, max {:.2} cm", error.mean_cm, error.p95_cm, error.max_cm);
+    print_sources(library);
+    if !result.reference_rows_skipped.is_empty() {
+        println!(
+            "left out the prepended reference pose rows (T-pose) of {} BVH trial(s)",
+            result.reference_rows_skipped.len()
+        );
+    }
+    if !result.restored_thorax.is_empty() {
+        let lengths: Vec<f32> = result.restored_thorax.iter().map(|(_, l)| l * 100.0).collect();
+        println!(
+            "restored the collapsed thorax (neck and collars starting at the spine's top joint) of {} BVH trial(s): {:.1}–{:.1} cm",
+            lengths.len(),
+            lengths.iter().copied().fold(f32::INFINITY, f32::min),
+            lengths.iter().copied().fold(0.0, f32::max),
+        );
+    }
     for (path, frames, dropped) in &result.trimmed {
         println!(
             "trimmed {}: {dropped} of {frames} frames were corrupt (joint jumps) or in too-short pieces",
@@ -161,6 +180,7 @@ fn info(args: InfoArgs) -> Result<()> {
         "retarget error (mapped CMU joints vs SMPL forward kinematics, 24 joints): mean {:.2} cm, p95 {:.2} cm, max {:.2} cm",
         error.mean_cm, error.p95_cm, error.max_cm
     );
+    print_sources(&library);
     println!();
     println!("{:>7} {:>6} {:>8} {:>12} {:>8} {:>7}", "subject", "clips", "minutes", "head height", "mean cm", "p95 cm");
     for (subject, clips) in library.clips_by_subject() {
@@ -215,6 +235,31 @@ fn info(args: InfoArgs) -> Result<()> {
     Ok(())
 }
 
+/// The retarget error per data source (ASF/AMC, each BVH conversion).
+fn print_sources(library: &MotionLibrary) {
+    println!();
+    println!(
+        "{:<36} {:>8} {:>6} {:>8} {:>8} {:>7} {:>7}",
+        "source", "subjects", "clips", "minutes", "mean cm", "p95 cm", "max cm"
+    );
+    for (source, clips) in library.clips_by_source_format() {
+        let s = library.retarget_summary(&clips);
+        let frames: u64 = clips.iter().map(|&c| u64::from(library.clips()[c].frames)).sum();
+        let mut subjects: Vec<u32> = clips.iter().map(|&c| library.clips()[c].subject).collect();
+        subjects.sort_unstable();
+        subjects.dedup();
+        println!(
+            "{source:<36} {:>8} {:>6} {:>8.2} {:>8.2} {:>7.2} {:>7.2}",
+            subjects.len(),
+            clips.len(),
+            frames as f64 / f64::from(library.fps()) / 60.0,
+            s.mean_cm,
+            s.p95_cm,
+            s.max_cm
+        );
+    }
+}
+
 /// Frame-weighted mean error per joint over the library, cm.
 fn per_joint_means(library: &MotionLibrary) -> Vec<f64> {
     let mut sums = vec![0.0f64; JOINT_NAMES.len()];
@@ -247,6 +292,26 @@ fn info_json(library: &MotionLibrary, path: &Path) -> serde_json::Value {
             })
         })
         .collect();
+    let sources: Vec<serde_json::Value> = library
+        .clips_by_source_format()
+        .into_iter()
+        .map(|(source, clips)| {
+            let s = library.retarget_summary(&clips);
+            let frames: u64 = clips.iter().map(|&c| u64::from(library.clips()[c].frames)).sum();
+            let mut subjects: Vec<u32> = clips.iter().map(|&c| library.clips()[c].subject).collect();
+            subjects.sort_unstable();
+            subjects.dedup();
+            serde_json::json!({
+                "source": source,
+                "subjects": subjects,
+                "clips": clips.len(),
+                "frames": frames,
+                "retarget_mean_cm": s.mean_cm,
+                "retarget_p95_cm": s.p95_cm,
+                "retarget_max_cm": s.max_cm,
+            })
+        })
+        .collect();
     serde_json::json!({
         "library": path.display().to_string(),
         "fps": library.fps(),
@@ -259,6 +324,7 @@ fn info_json(library: &MotionLibrary, path: &Path) -> serde_json::Value {
         "retarget_max_cm": error.max_cm,
         "per_joint_mean_cm": per_joint_means(library),
         "per_subject": subjects,
+        "per_source": sources,
         "clip_list": library.clips(),
     })
 }

@@ -341,7 +341,7 @@ function showSession(s) {
     ['source', s.source],
     ['timeline', `${s.frames} frames at ${s.fps} fps (${s.duration_s.toFixed(1)} s)`],
     ['wearer', `${s.tracking_points}-point tracking: ${s.devices.join(', ')}`
-      + (s.tracking_reason ? ` (1-point because ${s.tracking_reason})` : '')],
+      + (s.tracking_reason ? ` (${s.tracking_reason})` : '')],
     ...(s.wrists ?? []).map((w) => [`${w.side} wrist`,
       `tracked on ${w.tracked_percent.toFixed(1)}% of frames, longest gap ${w.longest_gap_s.toFixed(2)} s (${w.source})`]),
     ['floor', s.floor ? `${s.floor.height_m.toFixed(3)} m, from ${s.floor.source}` : 'unknown'],

@@ -195,7 +195,7 @@ describe('bad input and failures', () => {
     }
   });
 
-  test('an MPS folder with hand tracking: wrist coverage, the floor, 1-point and why, wrists drawn only where tracked', async () => {
+  test('an MPS folder with hand tracking: wrist coverage, the floor, 3-point with wrists that come and go, wrists drawn only where tracked', async () => {
     const app = await openApp(browser, '?backend=webgl2');
     try {
       await app.waitState('idle');
@@ -203,7 +203,7 @@ describe('bad input and failures', () => {
       assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
       const facts = await app.text('#session-facts');
       assert.match(facts, /single Aria MPS device folder/);
-      assert.match(facts, /1-point tracking: head, left_wrist, right_wrist \(1-point because the wrists are tracked on only \d+% \(left\) and \d+% \(right\)/);
+      assert.match(facts, /3-point tracking: head, left_wrist, right_wrist \(the wrists are tracked on \d+% \(left\) and \d+% \(right\) of the head's frames: the 3-point model uses them where they are/);
       assert.match(facts, /left wrist\s*tracked on \d+\.\d% of frames, longest gap 0\.[45]\d s \(MPS wrist_and_palm_poses\.csv v2/);
       assert.match(facts, /right wrist\s*tracked on \d+\.\d% of frames, longest gap 0\.[23]\d s/);
       assert.match(facts, /floor\s*-?0\.0\d\d m, from semidense points \(\d+ well-constrained points at the floor/);

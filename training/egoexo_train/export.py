@@ -13,11 +13,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .model import EGO_DIM, EXO_TOKEN_DIM, EXO_TOKEN_LAYOUT_VERSION, K, POSE_DIM, EgoNet, Fusion, Gate
+from .model import EGO_DIM, EGO_LAYOUT_VERSION, EXO_TOKEN_DIM, EXO_TOKEN_LAYOUT_VERSION, K, POSE_DIM, EgoNet, Fusion, Gate
 
 WINDOW = 96
 OPSET = 17
-EGO_LAYOUT_VERSION = 1
 GATE_LAYOUT_VERSION = 2
 GATE_FEATURE_DIM = 6
 

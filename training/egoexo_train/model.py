@@ -2,9 +2,9 @@
 
 Tensor layouts (row-major, batch first, T = 96 frames, N observer slots, K = 13 keypoints):
 
-- EgoNet: ``ego [B,T,60]`` -> ``root_6d [B,T,6]``, ``body_6d [B,T,126]`` (window frame).
+- EgoNet: ``ego [B,T,62]`` -> ``root_6d [B,T,6]``, ``body_6d [B,T,126]`` (window frame).
 - Gate: ``gate_features [B,T,N,K,F]`` -> ``gate [B,T,N,K]`` in [0, 1].
-- Fusion: ``ego [B,T,60]``, ``egonet [B,T,132]``, ``exo [B,T,N,K,7]`` (exo token layout v4:
+- Fusion: ``ego [B,T,62]``, ``egonet [B,T,132]``, ``exo [B,T,N,K,7]`` (exo token layout v4:
   per keypoint and frame, the ray endpoint xyz in the wearer head frame, the offset xyz from
   EgoNet's coarse keypoint to its ray in the window frame, and the gate, 0 where there is no
   valid ray), ``observer_mask [B,T,N]`` (1 = present) -> ``root_6d [B,T,6]``,
@@ -21,7 +21,10 @@ import math
 import torch
 from torch import nn
 
-EGO_DIM = 60
+EGO_DIM = 62
+#: The ego feature layout these networks read (`EGO_FEATURE_LAYOUT_VERSION` in `egoexo-core`):
+#: v2 adds per-frame wrist validity (slots 60, 61).
+EGO_LAYOUT_VERSION = 2
 POSE_DIM = 132
 ROOT_DIM = 6
 BODY_DIM = 126

@@ -38,7 +38,7 @@ from typing import NamedTuple
 import numpy as np
 import torch
 
-from .model import EgoNet, Fusion, Gate
+from .model import EGO_LAYOUT_VERSION, EgoNet, Fusion, Gate
 from .rotations import forward_kinematics
 
 HEAD_JOINT = 15
@@ -49,7 +49,7 @@ GATE_DROPOUT = 0.25
 EGO_KEYS = ["ego", "target", "frame_mask", "rest_joints"]
 BATCH_KEYS_EXTRA = ["target_positions"]
 #: The shard format this code reads (`SHARD_FORMAT_VERSION` in `egoexo-dataset`).
-SHARD_FORMAT_VERSION = 4
+SHARD_FORMAT_VERSION = 5
 FUSION_KEYS = EGO_KEYS + ["egonet", "rays", "ray_offsets", "ray_valid", "gate_features", "observer_mask", "occluded",
                           "ray_error"]
 #: A ray counts as accurate for the gate's auxiliary loss when it passes this close (metres)
@@ -75,6 +75,9 @@ def load_shards(folders, keys: list, exclude_fold=None) -> dict:
         if index.get("format_version") != SHARD_FORMAT_VERSION:
             raise SystemExit(f"{folder / 'index.json'}: format_version {index.get('format_version')}, expected "
                              f"{SHARD_FORMAT_VERSION}: remake the shards with this build's `egoexo synth --shards`")
+        if index.get("ego_feature_layout_version") != EGO_LAYOUT_VERSION:
+            raise SystemExit(f"{folder / 'index.json'}: ego feature layout v{index.get('ego_feature_layout_version')}, "
+                             f"these networks read v{EGO_LAYOUT_VERSION}: remake the shards with this build")
     parts = {k: [] for k in keys}
     for folder, index in zip(folders, indices):
         for entry in index["shards"]:

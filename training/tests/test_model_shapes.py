@@ -4,13 +4,13 @@
 import pytest
 import torch
 
-from egoexo_train.model import (EXO_TOKEN_DIM, EgoNet, Fusion, Gate, faded_exo_tracks, gaussian_kernel_matrix,
+from egoexo_train.model import (EGO_DIM, EXO_TOKEN_DIM, EgoNet, Fusion, Gate, faded_exo_tracks, gaussian_kernel_matrix,
                                 gaussian_smoothing_matrix, gate_weighted_track_smoothing)
 
 
 def test_shapes_and_gate_range():
     torch.manual_seed(0)
-    ego = torch.randn(2, 96, 60)
+    ego = torch.randn(2, 96, EGO_DIM)
     root, body = EgoNet(96, 32)(ego)
     assert root.shape == (2, 96, 6) and body.shape == (2, 96, 126)
     gate = Gate(5, 16)(torch.rand(2, 96, 3, 13, 5))
@@ -22,7 +22,7 @@ def test_masked_observers_do_not_change_the_output(exo_embed, fade):
     torch.manual_seed(1)
     fusion = Fusion(96, 32, 4, 1, 1, dropout=0.0, exo_embed=exo_embed, exo_smoothing=2.0 if fade else 0.0,
                     exo_fade=fade).eval()
-    ego, egonet = torch.randn(1, 96, 60), torch.randn(1, 96, 132)
+    ego, egonet = torch.randn(1, 96, EGO_DIM), torch.randn(1, 96, 132)
     exo = torch.randn(1, 96, 3, 13, EXO_TOKEN_DIM)
     mask = torch.tensor([1.0, 0.0, 0.0]).expand(1, 96, 3).clone()
     other = exo.clone()
@@ -86,7 +86,7 @@ def test_fusion_output_smoothing_is_the_fixed_low_pass_of_the_unsmoothed_network
     plain = Fusion(96, 32, 4, 1, 1, dropout=0.0).eval()
     smoothed = Fusion(96, 32, 4, 1, 1, dropout=0.0, output_smoothing=1.0).eval()
     smoothed.load_state_dict(plain.state_dict())  # the low-pass has no weights of its own
-    ego, egonet = torch.randn(1, 96, 60), torch.randn(1, 96, 132)
+    ego, egonet = torch.randn(1, 96, EGO_DIM), torch.randn(1, 96, 132)
     exo, mask = torch.randn(1, 96, 2, 13, EXO_TOKEN_DIM), torch.ones(1, 96, 2)
     with torch.no_grad():
         root, body = plain(ego, egonet, exo, mask)

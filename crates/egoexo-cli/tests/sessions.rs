@@ -112,7 +112,7 @@ fn write_mps_wearer(dir: &Path) {
 }
 
 #[test]
-fn inspect_an_mps_folder_shows_wrist_coverage_floor_and_why_1_point() {
+fn inspect_an_mps_folder_shows_wrist_coverage_floor_and_how_3_point_uses_them() {
     let dir = scratch("mps-wearer").join("mps_wearer_vrs");
     write_mps_wearer(&dir);
     let o = egoexo(&["inspect", path_str(&dir)]);
@@ -124,7 +124,7 @@ fn inspect_an_mps_folder_shows_wrist_coverage_floor_and_why_1_point() {
         "left wrist tracked on 98.9% of frames, longest gap 0.03 s",
         "right wrist tracked on 6",
         "wrists from  MPS wrist_and_palm_poses.csv v2 (positions and normals); orientation from the hand direction and the wrist normal",
-        "tracking     1-point (the wrists are tracked on only 99% (left) and 6",
+        "tracking     3-point (the wrists are tracked on 99% (left) and 6",
         "m, from semidense points (600 well-constrained points at the floor, trajectory/global_points.csv.gz)",
     ] {
         assert!(out.contains(needle), "missing {needle:?} in\n{out}");
@@ -138,20 +138,22 @@ fn inspect_an_mps_folder_shows_wrist_coverage_floor_and_why_1_point() {
     assert!((0.95..1.1).contains(&gap), "right wrist gap {gap} s");
     let o = egoexo(&["inspect", path_str(&dir), "--json"]);
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert_eq!(v["tracking"]["points"], 1);
+    assert_eq!(v["tracking"]["points"], 3);
+    assert!(v["tracking"]["reason"].as_str().unwrap().contains("uses them where they are"), "{}", v["tracking"]);
     assert_eq!(v["wrist_source"]["form"], "wrist_and_palm_v2");
     assert!(v["floor"]["height_m"].as_f64().unwrap().abs() < 0.005);
     assert!((v["wrists"][0]["tracked_percent"].as_f64().unwrap() - 98.9).abs() < 0.1);
-    // Reconstructing it takes the 1-point model by default and says why.
+    // Reconstructing it takes the 3-point model by default (wrists where they are tracked)
+    // and says how much of the time that is.
     let out = dir.with_file_name("motion.json");
     let o = egoexo(&["reconstruct", path_str(&dir), "-o", path_str(&out), "--ego-only", "--force"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
-        stderr(&o).contains("note: reconstructing with the 1-point model: the wrists are tracked on only"),
+        stderr(&o).contains("note: 3-point with wrists that come and go: the wrists are tracked on"),
         "{}",
         stderr(&o)
     );
-    assert!(stdout(&o).contains("(ego-only, 1-point)"), "{}", stdout(&o));
+    assert!(stdout(&o).contains("(ego-only, 3-point)"), "{}", stdout(&o));
 }
 
 #[test]

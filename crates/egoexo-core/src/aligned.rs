@@ -98,16 +98,17 @@ pub struct StreamCoverage {
     pub frames: usize,
 }
 
-/// Least fraction of the head's tracked frames on which each wrist must be tracked for
-/// [`AlignedSession::tracking_choice`] to pick the 3-point model (a wrist device that starts a
-/// moment after the glasses still counts as present).
+/// Least fraction of the head's tracked frames on which both wrists must be tracked for
+/// [`AlignedSession::tracking_choice`] to call them complete (wrist devices); below it the
+/// choice carries a note that the wrists come and go.
 pub const THREE_POINT_MIN_WRIST_COVERAGE: f32 = 0.98;
 
-/// The default tracking mode of a session, and why it is 1-point although wrists exist.
+/// The default tracking mode of a session, with a note when its wrists are only partly there.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct TrackingChoice {
     pub mode: TrackingMode,
-    /// Set when wrists exist but the 1-point model is chosen.
+    /// Set when wrists exist but are tracked on only part of the frames (or only one
+    /// exists): what the 3-point model will do with them.
     pub reason: Option<String>,
 }
 
@@ -197,9 +198,10 @@ impl AlignedSession {
         self.tracking_choice().mode
     }
 
-    /// Whether both wrist trajectories exist (3-point tracking can be asked for).
+    /// Whether either wrist trajectory exists (3-point tracking can be asked for: a wrist
+    /// that is missing, or untracked on a frame, reaches the network as not tracked).
     pub fn has_wrists(&self) -> bool {
-        self.left_wrist.is_some() && self.right_wrist.is_some()
+        self.left_wrist.is_some() || self.right_wrist.is_some()
     }
 
     /// Per wrist (left, right): the fraction of the head's tracked frames on which it is
@@ -214,41 +216,34 @@ impl AlignedSession {
         })
     }
 
-    /// The tracking mode to reconstruct with by default, and why when it is not the one the
-    /// devices suggest: 3-point when both wrists are tracked on at least
-    /// [`THREE_POINT_MIN_WRIST_COVERAGE`] of the head's frames, else 1-point. Wrists from hand
-    /// tracking come and go with the hands' visibility; the 3-point model reads them on every
-    /// frame of a window, so a session whose wrists are there only part of the time gets the
-    /// 1-point model rather than holes.
+    /// The tracking mode to reconstruct with by default: 3-point whenever the session has a
+    /// wrist (ego feature layout v2 tells the network, frame by frame, which wrists are
+    /// tracked, so hand-tracking wrists that come and go are used where they exist), else
+    /// 1-point. The note says how much of the time the wrists are there when that is not
+    /// (nearly) always.
     pub fn tracking_choice(&self) -> TrackingChoice {
         let [left, right] = self.wrist_coverage();
-        match (left, right) {
-            (Some(l), Some(r)) if l >= THREE_POINT_MIN_WRIST_COVERAGE && r >= THREE_POINT_MIN_WRIST_COVERAGE => {
-                TrackingChoice { mode: TrackingMode::ThreePoint, reason: None }
-            }
-            (Some(l), Some(r)) => TrackingChoice {
-                mode: TrackingMode::OnePoint,
-                reason: Some(format!(
-                    "the wrists are tracked on only {:.0}% (left) and {:.0}% (right) of the head's frames; the 3-point model needs both on at least {:.0}%",
-                    l * 100.0,
-                    r * 100.0,
-                    THREE_POINT_MIN_WRIST_COVERAGE * 100.0
-                )),
-            },
-            (Some(_), None) | (None, Some(_)) => TrackingChoice {
-                mode: TrackingMode::OnePoint,
-                reason: Some("only one wrist is tracked; the 3-point model needs both".into()),
-            },
-            (None, None) => TrackingChoice { mode: TrackingMode::OnePoint, reason: None },
-        }
+        let percent = |c: f32| format!("{:.0}%", c * 100.0);
+        let reason = match (left, right) {
+            (Some(l), Some(r)) if l >= THREE_POINT_MIN_WRIST_COVERAGE && r >= THREE_POINT_MIN_WRIST_COVERAGE => None,
+            (Some(l), Some(r)) => Some(format!(
+                "the wrists are tracked on {} (left) and {} (right) of the head's frames: the 3-point model uses them where they are and the head alone elsewhere",
+                percent(l),
+                percent(r)
+            )),
+            (Some(c), None) | (None, Some(c)) => Some(format!(
+                "only the {} wrist is tracked ({} of the head's frames): the 3-point model reads the other as never tracked",
+                if left.is_some() { "left" } else { "right" },
+                percent(c)
+            )),
+            (None, None) => return TrackingChoice { mode: TrackingMode::OnePoint, reason: None },
+        };
+        TrackingChoice { mode: TrackingMode::ThreePoint, reason }
     }
 
-    /// Whether the wearer is reconstructable at `frame` in `tracking` mode: the head is
-    /// tracked, and in 3-point mode both wrists are too.
-    pub fn wearer_tracked(&self, frame: usize, tracking: TrackingMode) -> bool {
-        let tracked = |t: &AlignedTrajectory| t.valid.get(frame).copied().unwrap_or(false);
-        let wrist = |w: &Option<AlignedTrajectory>| w.as_ref().is_some_and(tracked);
-        tracked(&self.head)
-            && (tracking == TrackingMode::OnePoint || (wrist(&self.left_wrist) && wrist(&self.right_wrist)))
+    /// Whether the wearer is reconstructable at `frame`: the head is tracked. (Wrists, in
+    /// 3-point mode, may come and go: their per-frame validity reaches the network.)
+    pub fn wearer_tracked(&self, frame: usize) -> bool {
+        self.head.valid.get(frame).copied().unwrap_or(false)
     }
 }

@@ -14,19 +14,26 @@
 //! choice on top of the paper's normalisation: the training set is small, and a model should
 //! not have to learn that walking north and walking east are the same motion.
 //!
-//! # Layout v1 (60 numbers per frame)
+//! # Layout v2 (62 numbers per frame)
 //! | slots | content |
 //! |---|---|
 //! | 0..18 | head block |
-//! | 18..36 | left-wrist block (zero in 1-point mode) |
-//! | 36..54 | right-wrist block (zero in 1-point mode) |
+//! | 18..36 | left-wrist block (zero where the left wrist is not tracked, and in 1-point mode) |
+//! | 36..54 | right-wrist block (likewise) |
 //! | 54..60 | horizontal displacement encoding |
+//! | 60, 61 | left, right wrist tracked at this frame (1 or 0; 0 in 1-point mode) |
 //!
 //! Each 18-number device block: `0..6` orientation `R_W_device` as [`Rot6d`]; `6..12`
 //! frame-to-frame rotation `R_{t−1}ᵀ R_t` as 6D (identity at a sequence's first frame);
 //! `12..15` position; `15..18` linear velocity (backward difference × fps, m/s; zero at a
 //! sequence's first frame). The head position is relative to the window's first frame; wrist
-//! positions are relative to the head at the same frame (both in `W` axes).
+//! positions are relative to the head at the same frame (both in `W` axes). A wrist tracked
+//! at `t` but not at `t − 1` (it just came into the glasses' view) starts like a sequence:
+//! identity rotation step, zero velocity.
+//!
+//! v1 (60 numbers) had no validity slots: a 3-point model read both wrists on every frame,
+//! so a session whose wrists come and go (hand tracking) had to fall back to 1-point. Models
+//! trained on v1 are refused by the manifest check.
 //!
 //! The displacement encoding (the paper's 6-D XY-plane displacement; our horizontal plane is
 //! XZ): with `d = (dx, dy, dz)` the head position in `W`: `[dx, dz, dx_h, dz_h, √(dx²+dz²), dy]`
@@ -42,9 +49,9 @@ use crate::rigid::RigidTransform;
 use crate::rotation::Rot6d;
 
 /// Version of the feature layout documented above; recorded in the models' manifest.
-pub const EGO_FEATURE_LAYOUT_VERSION: u32 = 1;
+pub const EGO_FEATURE_LAYOUT_VERSION: u32 = 2;
 /// Numbers per frame.
-pub const EGO_FEATURE_DIM: usize = 60;
+pub const EGO_FEATURE_DIM: usize = 62;
 /// Numbers per device block.
 pub const DEVICE_BLOCK_DIM: usize = 18;
 
@@ -59,11 +66,12 @@ pub enum TrackingMode {
 }
 
 impl TrackingMode {
-    /// The mode a wearer's devices allow: 3-point when both wrists are tracked, else 1-point.
+    /// The mode a wearer's devices allow: 3-point when a wrist is tracked (ego feature layout
+    /// v2 marks a missing or untracked wrist per frame), else 1-point.
     /// The one place this rule is written; sessions, the engine, the CLI and the worker ask
     /// here.
     pub fn for_devices(left_wrist: bool, right_wrist: bool) -> TrackingMode {
-        if left_wrist && right_wrist { TrackingMode::ThreePoint } else { TrackingMode::OnePoint }
+        if left_wrist || right_wrist { TrackingMode::ThreePoint } else { TrackingMode::OnePoint }
     }
 
     /// The paper's name for the mode: 1 or 3 points.
@@ -94,6 +102,10 @@ impl EgoFeatureLayout {
     pub const RIGHT_WRIST: Range<usize> = 36..54;
     /// Displacement encoding slots.
     pub const DISPLACEMENT: Range<usize> = 54..60;
+    /// Left wrist tracked (1) or not (0).
+    pub const LEFT_WRIST_VALID: usize = 60;
+    /// Right wrist tracked (1) or not (0).
+    pub const RIGHT_WRIST_VALID: usize = 61;
     /// Within a block: orientation (6D).
     pub const BLOCK_ORIENTATION: Range<usize> = 0..6;
     /// Within a block: frame-to-frame rotation (6D).
@@ -121,8 +133,8 @@ pub enum FeatureError {
     EmptyWindow { start: usize, end: usize },
     #[error("window {start}..{end} exceeds the {len}-frame trajectory")]
     WindowOutOfRange { start: usize, end: usize, len: usize },
-    #[error("3-point tracking needs both wrist trajectories; {missing} is missing")]
-    MissingWrist { missing: &'static str },
+    #[error("{device} validity has {got} frames but the head has {expected}")]
+    ValidityLengthMismatch { device: &'static str, got: usize, expected: usize },
     #[error("{device} trajectory has {got} frames but the head has {expected}")]
     LengthMismatch { device: &'static str, got: usize, expected: usize },
     #[error("{device} pose at frame {frame} is not finite")]
@@ -135,8 +147,27 @@ pub enum FeatureError {
 #[derive(Clone, Copy, Debug)]
 pub struct EgoTrajectories<'a> {
     pub head: &'a [RigidTransform],
-    pub left_wrist: Option<&'a [RigidTransform]>,
-    pub right_wrist: Option<&'a [RigidTransform]>,
+    pub left_wrist: Option<WristTrack<'a>>,
+    pub right_wrist: Option<WristTrack<'a>>,
+}
+
+/// One wrist on the head's timeline: `T_world_wrist` per frame and whether it was tracked
+/// there (`None`: every frame). Poses of untracked frames are never read.
+#[derive(Clone, Copy, Debug)]
+pub struct WristTrack<'a> {
+    pub poses: &'a [RigidTransform],
+    pub valid: Option<&'a [bool]>,
+}
+
+impl<'a> WristTrack<'a> {
+    /// A wrist tracked on every frame (wrist devices).
+    pub fn always(poses: &'a [RigidTransform]) -> Self {
+        Self { poses, valid: None }
+    }
+
+    fn tracked(&self, frame: usize) -> bool {
+        self.valid.is_none_or(|v| v.get(frame).copied().unwrap_or(false))
+    }
 }
 
 /// Features for one window.
@@ -183,14 +214,21 @@ pub fn window_frame(t_world_head: &RigidTransform) -> RigidTransform {
 fn check_trajectory(
     device: &'static str,
     poses: &[RigidTransform],
+    valid: Option<&[bool]>,
     expected: usize,
     window: &Range<usize>,
 ) -> Result<(), FeatureError> {
     if poses.len() != expected {
         return Err(FeatureError::LengthMismatch { device, got: poses.len(), expected });
     }
+    if let Some(valid) = valid
+        && valid.len() != expected
+    {
+        return Err(FeatureError::ValidityLengthMismatch { device, got: valid.len(), expected });
+    }
     let from = window.start.saturating_sub(1);
-    if let Some(frame) = (from..window.end).find(|&i| !poses[i].is_finite()) {
+    let tracked = |i: usize| valid.is_none_or(|v| v[i]);
+    if let Some(frame) = (from..window.end).find(|&i| tracked(i) && !poses[i].is_finite()) {
         return Err(FeatureError::NonFinitePose { device, frame });
     }
     Ok(())
@@ -221,17 +259,17 @@ pub fn ego_features(
     if window.end > n {
         return Err(FeatureError::WindowOutOfRange { start: window.start, end: window.end, len: n });
     }
-    check_trajectory("head", trajectories.head, n, &window)?;
-    let wrists = match tracking {
-        TrackingMode::OnePoint => None,
-        TrackingMode::ThreePoint => {
-            let left = trajectories.left_wrist.ok_or(FeatureError::MissingWrist { missing: "left wrist" })?;
-            let right = trajectories.right_wrist.ok_or(FeatureError::MissingWrist { missing: "right wrist" })?;
-            check_trajectory("left wrist", left, n, &window)?;
-            check_trajectory("right wrist", right, n, &window)?;
-            Some([left, right])
-        }
+    check_trajectory("head", trajectories.head, None, n, &window)?;
+    // In 3-point mode a missing wrist is a wrist never tracked; 1-point reads no wrist.
+    let wrists: [Option<WristTrack<'_>>; 2] = match tracking {
+        TrackingMode::OnePoint => [None, None],
+        TrackingMode::ThreePoint => [trajectories.left_wrist, trajectories.right_wrist],
     };
+    for (wrist, device) in wrists.iter().zip(["left wrist", "right wrist"]) {
+        if let Some(w) = wrist {
+            check_trajectory(device, w.poses, w.valid, n, &window)?;
+        }
+    }
 
     let head = trajectories.head;
     let t_world_window = window_frame(&head[window.start]);
@@ -253,14 +291,20 @@ pub fn ego_features(
             head_pos,
             head_vel,
         );
-        // Wrist blocks: positions relative to the head at the same frame.
-        if let Some(wrists) = wrists {
-            for (wrist, range) in wrists.iter().zip([EgoFeatureLayout::LEFT_WRIST, EgoFeatureLayout::RIGHT_WRIST]) {
-                let rel = |i: usize| wrist[i].translation - head[i].translation;
-                let pos = r_window_world * rel(t);
-                let vel = prev.map_or(Vec3::ZERO, |p| r_window_world * (rel(t) - rel(p)) * fps);
-                write_block(&mut row[range], &wrist[t], prev.map(|p| &wrist[p]), r_window_world, pos, vel);
-            }
+        // Wrist blocks where tracked: positions relative to the head at the same frame.
+        let slots = [
+            (EgoFeatureLayout::LEFT_WRIST, EgoFeatureLayout::LEFT_WRIST_VALID),
+            (EgoFeatureLayout::RIGHT_WRIST, EgoFeatureLayout::RIGHT_WRIST_VALID),
+        ];
+        for (wrist, (range, valid_slot)) in wrists.iter().zip(slots) {
+            let Some(wrist) = wrist.filter(|w| w.tracked(t)) else { continue };
+            let poses = wrist.poses;
+            let prev = prev.filter(|&p| wrist.tracked(p));
+            let rel = |i: usize| poses[i].translation - head[i].translation;
+            let pos = r_window_world * rel(t);
+            let vel = prev.map_or(Vec3::ZERO, |p| r_window_world * (rel(t) - rel(p)) * fps);
+            write_block(&mut row[range], &poses[t], prev.map(|p| &poses[p]), r_window_world, pos, vel);
+            row[valid_slot] = 1.0;
         }
         // Horizontal displacement encoding.
         let delta_yaw = heading_yaw(head[t].rotation) - window_yaw;

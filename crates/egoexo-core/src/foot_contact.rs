@@ -12,10 +12,18 @@
 //!   gives the floor of the metric (a real foot rolls a little).
 //!
 //! Positions are world positions in metres, Y up; the floor is a height on Y.
+//!
+//! [`lift_feet_above_floor`] is the reconstruction's floor constraint: a foot that goes
+//! through the floor is raised onto it by folding its leg (two-bone IK at hip and knee), the
+//! pelvis, upper body and head staying where the networks and the head device put them. A
+//! wearer who lowers the head (crouching, kneeling, sitting) while the networks keep the legs
+//! straight thus bends the knees instead of sinking through the floor.
 
+use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
 
 use crate::metrics::JointPositions;
+use crate::skeleton::{SmplPose, SmplSkeleton};
 
 /// The ankle and foot joints (SMPL order).
 pub const FOOT_JOINTS: [usize; 4] = [7, 8, 10, 11];
@@ -25,6 +33,80 @@ pub const FOOT_JOINT_ABOVE_SOLE_M: f32 = 0.03;
 pub const CONTACT_HEIGHT_M: f32 = 0.05;
 /// A foot joint slower than this (horizontally) can be in contact, m/s.
 pub const STANCE_SPEED_M_S: f32 = 0.25;
+
+/// The legs as SMPL joints: (hip, knee, ankle, foot), left then right.
+pub const LEGS: [(usize, usize, usize, usize); 2] = [(1, 4, 7, 10), (2, 5, 8, 11)];
+
+/// Height of the foot joints above the soles for `skeleton`: [`FOOT_JOINT_ABOVE_SOLE_M`] scaled
+/// with the body, metres.
+pub fn sole_offset_m(skeleton: &SmplSkeleton) -> f32 {
+    FOOT_JOINT_ABOVE_SOLE_M * skeleton.head_height() / SmplSkeleton::mean_shape().head_height()
+}
+
+/// What [`lift_feet_above_floor`] did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct FootLift {
+    /// Frames where a leg was folded.
+    pub frames: usize,
+    /// The largest lift, metres.
+    pub max_lift_m: f32,
+}
+
+/// Folds each leg whose ankle or foot joint is below `floor_y` + the soles' offset, so that
+/// joint sits on the floor: two-bone IK moves the knee and ankle (the ankle straight up by
+/// the penetration), bending the knee in the plane it already bends in (forward when the leg
+/// is straight); each foot keeps its world orientation; the pelvis and everything above it
+/// are untouched. A leg already folded as far as it goes stays partly below. Poses are
+/// changed in place; `floor_y` is a world height (Y up), metres.
+pub fn lift_feet_above_floor(skeleton: &SmplSkeleton, poses: &mut [SmplPose], floor_y: f32) -> FootLift {
+    let sole = sole_offset_m(skeleton);
+    let mut report = FootLift::default();
+    for pose in poses.iter_mut() {
+        let fk = skeleton.forward_kinematics(pose);
+        let (p, r) = (&fk.positions, &fk.rotations);
+        let mut changed = false;
+        for (hip, knee, ankle, foot) in LEGS {
+            let lift = floor_y + sole - p[ankle].y.min(p[foot].y);
+            if !(lift > 1e-4) {
+                continue;
+            }
+            let (h, k, a) = (p[hip], p[knee], p[ankle]);
+            let (thigh, shin) = ((k - h).length(), (a - k).length());
+            if thigh < 1e-6 || shin < 1e-6 {
+                continue;
+            }
+            let to_target = a + Vec3::Y * lift - h;
+            let Some(direction) = to_target.try_normalize() else { continue };
+            let reach = to_target.length().clamp((thigh - shin).abs() + 1e-4, thigh + shin - 1e-4);
+            // The knee's offset from the hip→ankle line: keep its side, or bend forward.
+            let sideways = (k - h) - direction * (k - h).dot(direction);
+            let forward = r[0] * Vec3::Z;
+            let bend = sideways
+                .try_normalize()
+                .filter(|_| sideways.length() > 0.01 * thigh)
+                .or_else(|| (forward - direction * forward.dot(direction)).try_normalize())
+                .unwrap_or(Vec3::Z);
+            let along = (thigh * thigh - shin * shin + reach * reach) / (2.0 * reach);
+            let across = (thigh * thigh - along * along).max(0.0).sqrt();
+            let new_knee = h + direction * along + bend * across;
+            let new_ankle = h + direction * reach;
+            // Global rotations: the hip swung onto the new thigh, the knee onto the new shin.
+            let hip_swing = Quat::from_rotation_arc((k - h) / thigh, (new_knee - h) / thigh);
+            let hip_rotation = (hip_swing * r[hip]).normalize();
+            let knee_carried = hip_swing * r[knee];
+            let shin_carried = (hip_swing * (a - k)) / shin;
+            let Some(new_shin) = (new_ankle - new_knee).try_normalize() else { continue };
+            let knee_rotation = (Quat::from_rotation_arc(shin_carried, new_shin) * knee_carried).normalize();
+            pose.body[hip - 1] = (r[0].conjugate() * hip_rotation).normalize();
+            pose.body[knee - 1] = (hip_rotation.conjugate() * knee_rotation).normalize();
+            pose.body[ankle - 1] = (knee_rotation.conjugate() * r[ankle]).normalize();
+            report.max_lift_m = report.max_lift_m.max(lift);
+            changed = true;
+        }
+        report.frames += usize::from(changed);
+    }
+    report
+}
 
 /// Feet against the floor over some frames.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -114,6 +196,47 @@ mod tests {
     use super::*;
     #[cfg(target_arch = "wasm32")]
     use wasm_bindgen_test::wasm_bindgen_test as test;
+
+    /// A standing body whose head has dropped by `drop` metres, legs still straight: the
+    /// lift folds the legs so the soles meet the floor, the head and upper body stay, the
+    /// knees bend forward and the feet keep their orientation.
+    #[test]
+    fn a_sunken_standing_body_folds_its_legs_onto_the_floor() {
+        let skeleton = SmplSkeleton::mean_shape();
+        let sole = sole_offset_m(&skeleton);
+        let rest = SmplPose::rest();
+        let fk = skeleton.forward_kinematics(&rest);
+        let standing_floor = FOOT_JOINTS.iter().map(|&j| fk.positions[j].y).fold(f32::INFINITY, f32::min) - sole;
+        for drop in [0.0f32, 0.1, 0.45] {
+            let mut poses = vec![SmplPose { translation: rest.translation - Vec3::Y * drop, ..rest }];
+            let before = skeleton.forward_kinematics(&poses[0]);
+            let report = lift_feet_above_floor(&skeleton, &mut poses, standing_floor);
+            let after = skeleton.forward_kinematics(&poses[0]);
+            if drop == 0.0 {
+                assert_eq!(report.frames, 0);
+                assert_eq!(poses[0], SmplPose { translation: rest.translation, ..rest });
+                continue;
+            }
+            assert_eq!(report.frames, 1);
+            assert!((report.max_lift_m - drop).abs() < 1e-3, "{report:?}");
+            let lowest = FOOT_JOINTS.iter().map(|&j| after.positions[j].y).fold(f32::INFINITY, f32::min) - sole;
+            assert!((lowest - standing_floor).abs() < 2e-3, "drop {drop}: soles at {lowest}, floor {standing_floor}");
+            for j in [0, 3, 6, 9, 12, 15, 16, 17, 20, 21] {
+                assert!(after.positions[j].abs_diff_eq(before.positions[j], 1e-5), "joint {j} moved");
+            }
+            for (hip, knee, ankle, foot) in LEGS {
+                // The knees come forward (+Z is the rest body's front), the feet stay level.
+                assert!(after.positions[knee].z > before.positions[knee].z + 0.02, "drop {drop}: knee {knee}");
+                assert!(after.rotations[ankle].angle_between(before.rotations[ankle]) < 1e-3);
+                assert!(after.rotations[foot].angle_between(before.rotations[foot]) < 1e-3);
+                // Bones keep their lengths (it is a rotation-only change).
+                let len =
+                    |t: &crate::skeleton::JointTransforms, a: usize, b: usize| t.positions[a].distance(t.positions[b]);
+                assert!((len(&after, hip, knee) - len(&before, hip, knee)).abs() < 1e-4);
+                assert!((len(&after, knee, ankle) - len(&before, knee, ankle)).abs() < 1e-4);
+            }
+        }
+    }
 
     /// Feet at height `y` (joints), moving along X at `vx` m/s.
     fn feet(frames: usize, y: impl Fn(usize) -> f32, vx: f32, fps: f32) -> Vec<JointPositions> {

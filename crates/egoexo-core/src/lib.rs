@@ -42,7 +42,7 @@ pub mod xr;
 
 pub use aligned::{AlignedSession, Timeline};
 pub use camera::{CameraCalibration, CameraError, Fisheye624, Pinhole, Projection};
-pub use ego_features::{EgoFeatureLayout, EgoTrajectories, TrackingMode};
+pub use ego_features::{EgoFeatureLayout, EgoTrajectories, TrackingMode, WristTrack};
 pub use euler::{Axis, EulerOrder};
 pub use exo_keypoints::{EXO_KEYPOINT_COUNT, ExoKeypoint, Keypoint2d};
 pub use metrics::{MetricsAccumulator, MotionMetrics};

@@ -10,7 +10,7 @@ use wasm_bindgen_test::wasm_bindgen_test as test;
 use common::*;
 use egoexo_core::ego_features::{
     EGO_FEATURE_DIM, EGO_FEATURE_LAYOUT_VERSION, EgoFeatureLayout as L, EgoTrajectories, FeatureError, TrackingMode,
-    ego_features, heading_yaw,
+    WristTrack, ego_features, heading_yaw,
 };
 use egoexo_core::glam::{Quat, Vec3};
 use egoexo_core::rigid::RigidTransform;
@@ -44,14 +44,20 @@ fn trajectories(n: usize, seed: f32) -> [Vec<RigidTransform>; 3] {
 }
 
 fn three_point(t: &[Vec<RigidTransform>; 3]) -> EgoTrajectories<'_> {
-    EgoTrajectories { head: &t[0], left_wrist: Some(&t[1]), right_wrist: Some(&t[2]) }
+    EgoTrajectories {
+        head: &t[0],
+        left_wrist: Some(WristTrack::always(&t[1])),
+        right_wrist: Some(WristTrack::always(&t[2])),
+    }
 }
 
 #[test]
-fn layout_is_the_papers_sixty_numbers() {
-    assert_eq!(EGO_FEATURE_DIM, 60);
+fn layout_is_the_papers_sixty_numbers_and_two_wrist_validity_slots() {
+    assert_eq!(EGO_FEATURE_DIM, 62);
+    assert_eq!(EGO_FEATURE_LAYOUT_VERSION, 2);
     assert_eq!(L::HEAD.len() + L::LEFT_WRIST.len() + L::RIGHT_WRIST.len(), 54);
     assert_eq!(L::DISPLACEMENT, 54..60);
+    assert_eq!((L::LEFT_WRIST_VALID, L::RIGHT_WRIST_VALID), (60, 61));
     let one = L::new(TrackingMode::OnePoint);
     assert!(!one.wrists_present && one.version == EGO_FEATURE_LAYOUT_VERSION);
     assert!(L::new(TrackingMode::ThreePoint).wrists_present);
@@ -80,7 +86,9 @@ fn one_point_mode_zeroes_the_wrist_slots() {
     assert!(!f1.layout.wrists_present);
     for i in 0..20 {
         assert!(f1.row(i)[18..54].iter().all(|&v| v == 0.0));
+        assert_eq!(f1.row(i)[60..62], [0.0, 0.0]);
         assert!(f3.row(i)[18..54].iter().any(|&v| v != 0.0));
+        assert_eq!(f3.row(i)[60..62], [1.0, 1.0]);
         assert_eq!(f1.row(i)[0..18], f3.row(i)[0..18]);
         assert_eq!(f1.row(i)[54..60], f3.row(i)[54..60]);
     }
@@ -159,7 +167,9 @@ proptest! {
 fn bad_input_is_an_error_not_a_panic() {
     let t = trajectories(10, 0.0);
     let one = EgoTrajectories { head: &t[0], left_wrist: None, right_wrist: None };
-    assert!(matches!(ego_features(&one, 0..10, FPS, TrackingMode::ThreePoint), Err(FeatureError::MissingWrist { .. })));
+    // 3-point with no wrist at all: both read as never tracked.
+    let none = ego_features(&one, 0..10, FPS, TrackingMode::ThreePoint).unwrap();
+    assert!((0..10).all(|i| none.row(i)[18..54].iter().all(|&v| v == 0.0) && none.row(i)[60..62] == [0.0, 0.0]));
     assert!(matches!(ego_features(&one, 5..5, FPS, TrackingMode::OnePoint), Err(FeatureError::EmptyWindow { .. })));
     assert!(matches!(
         ego_features(&one, 0..11, FPS, TrackingMode::OnePoint),
@@ -167,11 +177,36 @@ fn bad_input_is_an_error_not_a_panic() {
     ));
     assert!(matches!(ego_features(&one, 0..10, 0.0, TrackingMode::OnePoint), Err(FeatureError::InvalidFps(_))));
     let short = &t[1][..9];
-    let mismatched = EgoTrajectories { head: &t[0], left_wrist: Some(short), right_wrist: Some(&t[2]) };
+    let mismatched = EgoTrajectories {
+        head: &t[0],
+        left_wrist: Some(WristTrack::always(short)),
+        right_wrist: Some(WristTrack::always(&t[2])),
+    };
     assert!(matches!(
         ego_features(&mismatched, 0..10, FPS, TrackingMode::ThreePoint),
         Err(FeatureError::LengthMismatch { device: "left wrist", got: 9, expected: 10 })
     ));
+    let valid = vec![true; 9];
+    let bad_validity = EgoTrajectories {
+        head: &t[0],
+        left_wrist: Some(WristTrack { poses: &t[1], valid: Some(&valid) }),
+        right_wrist: None,
+    };
+    assert!(matches!(
+        ego_features(&bad_validity, 0..10, FPS, TrackingMode::ThreePoint),
+        Err(FeatureError::ValidityLengthMismatch { device: "left wrist", got: 9, expected: 10 })
+    ));
+    // A non-finite pose on a frame where the wrist is not tracked is never read.
+    let mut hidden_nan = t[1].clone();
+    hidden_nan[3].translation.x = f32::NAN;
+    let mut seen = vec![true; 10];
+    seen[3] = false;
+    let ok = EgoTrajectories {
+        head: &t[0],
+        left_wrist: Some(WristTrack { poses: &hidden_nan, valid: Some(&seen) }),
+        right_wrist: None,
+    };
+    assert!(ego_features(&ok, 0..10, FPS, TrackingMode::ThreePoint).is_ok());
     let mut broken = t[0].clone();
     broken[4].translation.y = f32::NAN;
     let nan = EgoTrajectories { head: &broken, left_wrist: None, right_wrist: None };
@@ -179,6 +214,42 @@ fn bad_input_is_an_error_not_a_panic() {
         ego_features(&nan, 0..10, FPS, TrackingMode::OnePoint),
         Err(FeatureError::NonFinitePose { device: "head", frame: 4 })
     ));
+}
+
+/// Wrists that come and go (hand tracking): a frame where a wrist is not tracked has its
+/// block zero and its validity slot 0; the frame it comes back starts like a sequence
+/// (identity step, zero velocity); tracked frames equal the always-tracked features.
+#[test]
+fn untracked_wrist_frames_are_zero_and_flagged() {
+    let t = trajectories(30, 0.4);
+    let mut valid = vec![true; 30];
+    for v in &mut valid[10..15] {
+        *v = false;
+    }
+    let partial = EgoTrajectories {
+        head: &t[0],
+        left_wrist: Some(WristTrack { poses: &t[1], valid: Some(&valid) }),
+        right_wrist: Some(WristTrack::always(&t[2])),
+    };
+    let f = ego_features(&partial, 0..30, FPS, TrackingMode::ThreePoint).unwrap();
+    let full = ego_features(&three_point(&t), 0..30, FPS, TrackingMode::ThreePoint).unwrap();
+    for i in 0..30 {
+        let row = f.row(i);
+        assert_eq!(row[36..54], full.row(i)[36..54], "the right wrist is unaffected");
+        assert_eq!(row[61], 1.0);
+        if (10..15).contains(&i) {
+            assert!(row[18..36].iter().all(|&v| v == 0.0), "frame {i}");
+            assert_eq!(row[60], 0.0);
+        } else if i == 15 {
+            assert_eq!(row[60], 1.0);
+            assert_eq!(row[18..24], full.row(i)[18..24], "orientation as tracked");
+            assert_eq!(row[24..30], Rot6d::from_quat(Quat::IDENTITY).0, "identity step after the gap");
+            assert_eq!(row[33..36], [0.0, 0.0, 0.0], "zero velocity after the gap");
+        } else {
+            assert_eq!(row[18..36], full.row(i)[18..36], "frame {i}");
+            assert_eq!(row[60], 1.0);
+        }
+    }
 }
 
 #[test]

@@ -26,7 +26,7 @@ use egoexo_synth::{SynthConfig, simulate};
 use serde::{Deserialize, Serialize};
 
 use crate::DatasetError;
-use crate::shards::mix;
+use crate::shards::{WristKind, mix};
 
 /// What to evaluate.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -34,8 +34,23 @@ pub struct EvalOptions {
     pub subjects: Vec<u32>,
     pub observers: usize,
     pub tracking: TrackingMode,
+    /// How 3-point wrists are simulated (devices, or hand tracking that comes and goes).
+    #[serde(default)]
+    pub wrists: WristKind,
+    /// Only clips whose head drops at least this far below the subject's standing head
+    /// height (crouching, kneeling, sitting, lying), metres ([`head_drop_m`]).
+    #[serde(default)]
+    pub min_head_drop_m: Option<f32>,
+    /// Apply the floor constraint to every method (the engine's default; off to measure the
+    /// networks alone).
+    #[serde(default = "yes")]
+    pub floor_contact: bool,
     pub seed: u64,
     pub methods: Vec<Method>,
+}
+
+fn yes() -> bool {
+    true
 }
 
 /// One table row: a method and the core's metric row (flattened in JSON).
@@ -59,6 +74,20 @@ pub struct FootRow {
 pub struct EvalReport {
     /// 1 or 3.
     pub tracking: u8,
+    /// How the 3-point wrists were simulated.
+    #[serde(default)]
+    pub wrists: WristKind,
+    /// Mean fraction of the frames on which each wrist was tracked (left, right); 1 for wrist
+    /// devices, 0 in 1-point mode.
+    #[serde(default)]
+    pub wrist_coverage: [f32; 2],
+    /// Whether the floor constraint was applied.
+    #[serde(default = "yes")]
+    pub floor_contact: bool,
+    /// Clips reconstructed with the 1-point model because no wrist was ever tracked (hand
+    /// tracking only).
+    #[serde(default)]
+    pub one_point_clips: usize,
     pub observers: usize,
     pub subjects: Vec<u32>,
     pub clips: usize,
@@ -184,17 +213,29 @@ fn paired_comparisons(methods: &[Method], per_clip: &[ClipMetrics], seed: u64) -
     out
 }
 
+/// How far the head joint drops below the skeleton's standing head height over a motion,
+/// metres: the standing height minus the lowest height of the head above the clip's floor
+/// (its lowest foot joint over the whole clip), so a crouch counts and a jump does not.
+pub fn head_drop_m(motion: &egoexo_core::motion::SmplMotion) -> f32 {
+    let fk: Vec<_> = motion.poses.iter().map(|p| motion.skeleton.forward_kinematics(p).positions).collect();
+    let floor = fk.iter().flat_map(|p| [7, 8, 10, 11].map(|j| p[j].y)).fold(f32::INFINITY, f32::min);
+    let lowest_head = fk.iter().map(|p| p[15].y).fold(f32::INFINITY, f32::min);
+    motion.skeleton.head_height() - (lowest_head - floor)
+}
+
 /// Simulates and aligns clip `clip` for evaluation (deterministic in `seed` and the clip).
 pub fn evaluation_session(
     library: &MotionLibrary,
     clip: usize,
     tracking: TrackingMode,
+    wrists: WristKind,
     observers: usize,
     seed: u64,
 ) -> Result<AlignedSession, DatasetError> {
     let info = library.clips().get(clip).ok_or_else(|| DatasetError::Options(format!("no clip {clip}")))?;
     let motion = library.motion(clip).map_err(|e| DatasetError::Library(e.to_string()))?;
-    let config = SynthConfig { tracking, observers, ..SynthConfig::default() };
+    let config =
+        SynthConfig { tracking, wrists: wrists.for_simulation(clip as u64), observers, ..SynthConfig::default() };
     let sim = simulate(&motion, &info.label(), &config, mix(seed, clip as u64, 0xE7A1))
         .map_err(|e| DatasetError::Simulate(e.to_string()))?;
     align(&sim.session, &AlignOptions { fps: library.fps(), ..AlignOptions::default() })
@@ -212,7 +253,8 @@ pub fn nearest_neighbour_index(
 ) -> Result<NearestNeighbourIndex, DatasetError> {
     let (mut features, mut poses) = (Vec::new(), Vec::new());
     for clip in library.clips_of_subjects(subjects) {
-        let aligned = evaluation_session(library, clip, tracking, 0, mix(seed, 0x4E4E, clip as u64))?;
+        let aligned =
+            evaluation_session(library, clip, tracking, WristKind::Devices, 0, mix(seed, 0x4E4E, clip as u64))?;
         for plan in plan_windows(&valid_spans(&aligned.head.valid), WINDOW, true) {
             let window = ego_window(&aligned, &plan, tracking).map_err(|e| DatasetError::Simulate(e.to_string()))?;
             let Some(targets) = window_targets(&aligned, &window) else { continue };
@@ -234,9 +276,25 @@ pub fn evaluate(
     options: &EvalOptions,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<EvalReport, DatasetError> {
-    let clips = library.clips_of_subjects(&options.subjects);
+    let mut clips = library.clips_of_subjects(&options.subjects);
     if clips.is_empty() {
         return Err(DatasetError::Options(format!("the library has no clips of subjects {:?}", options.subjects)));
+    }
+    if let Some(drop) = options.min_head_drop_m {
+        let mut kept = Vec::new();
+        for clip in clips {
+            let motion = library.motion(clip).map_err(|e| DatasetError::Library(e.to_string()))?;
+            if head_drop_m(&motion) >= drop {
+                kept.push(clip);
+            }
+        }
+        if kept.is_empty() {
+            return Err(DatasetError::Options(format!(
+                "no clip of subjects {:?} lowers the head by {drop} m or more",
+                options.subjects
+            )));
+        }
+        clips = kept;
     }
     let mut all: Vec<MetricsAccumulator> = options.methods.iter().map(|_| MetricsAccumulator::new()).collect();
     let mut occluded: Vec<MetricsAccumulator> = options.methods.iter().map(|_| MetricsAccumulator::new()).collect();
@@ -245,14 +303,29 @@ pub fn evaluate(
     let (mut truth, mut occluded_truth) = (MetricsAccumulator::new(), MetricsAccumulator::new());
     let mut per_clip: Vec<ClipMetrics> = options.methods.iter().map(|_| Vec::with_capacity(clips.len())).collect();
     let (mut frames, mut occluded_frames) = (0, 0);
+    // Hand-tracking wrists: each session's own choice (3-point when a hand was ever seen,
+    // else 1-point), as a real recording gets.
+    let session_tracking = match options.wrists {
+        WristKind::Devices => Some(options.tracking),
+        WristKind::HandTracking | WristKind::Mixed => None,
+    };
     let protocol = ReconstructOptions {
         method: Method::RestPose,
-        tracking: Some(options.tracking),
+        tracking: session_tracking,
         stride: WINDOW,
         non_overlapping: true,
+        floor_contact: options.floor_contact,
     };
+    // Frame-weighted wrist coverage over the clips' timelines.
+    let (mut wrist_frames, mut timeline_frames, mut one_point_clips) = ([0.0f64; 2], 0.0f64, 0usize);
     for (done, &clip) in clips.iter().enumerate() {
-        let aligned = evaluation_session(library, clip, options.tracking, options.observers, options.seed)?;
+        let aligned =
+            evaluation_session(library, clip, options.tracking, options.wrists, options.observers, options.seed)?;
+        for (sum, coverage) in wrist_frames.iter_mut().zip(aligned.wrist_coverage()) {
+            *sum += f64::from(coverage.unwrap_or(0.0)) * aligned.timeline.frames as f64;
+        }
+        timeline_frames += aligned.timeline.frames as f64;
+        one_point_clips += usize::from(session_tracking.is_none() && aligned.tracking_mode() == TrackingMode::OnePoint);
         let gt = aligned.ground_truth.as_ref().ok_or(DatasetError::NoGroundTruth)?;
         let gt_joints: Vec<_> = gt.poses.iter().map(|p| aligned.skeleton.forward_kinematics(p).positions).collect();
         let hidden: Vec<bool> = (0..aligned.timeline.frames)
@@ -306,6 +379,10 @@ pub fn evaluate(
     };
     Ok(EvalReport {
         tracking: options.tracking.points(),
+        wrists: options.wrists,
+        floor_contact: options.floor_contact,
+        one_point_clips,
+        wrist_coverage: wrist_frames.map(|f| if timeline_frames > 0.0 { (f / timeline_frames) as f32 } else { 0.0 }),
         observers: options.observers,
         subjects: options.subjects.clone(),
         clips: clips.len(),
@@ -333,8 +410,18 @@ fn method_names(methods: &[Method]) -> String {
 
 /// The report as the paper's table (plain text).
 pub fn format_table(report: &EvalReport) -> String {
+    let wrists = match report.wrists {
+        WristKind::Devices => String::new(),
+        kind => format!(
+            " ({}: left wrist tracked on {:.0}%, right on {:.0}% of frames; {} clip(s) without any wrist reconstructed 1-point)",
+            kind.describe(),
+            report.wrist_coverage[0] * 100.0,
+            report.wrist_coverage[1] * 100.0,
+            report.one_point_clips
+        ),
+    };
     let mut out = format!(
-        "{}-point tracking, {} observer(s), subjects {:?}: {} clips, {} frames ({} occluded)\n",
+        "{}-point tracking{wrists}, {} observer(s), subjects {:?}: {} clips, {} frames ({} occluded)\n",
         report.tracking, report.observers, report.subjects, report.clips, report.frames, report.occluded_frames
     );
     let sections = [
@@ -479,12 +566,12 @@ pub fn evaluate_live(
     let window_options =
         ReconstructOptions { tracking: Some(options.tracking), stride: WINDOW, ..ReconstructOptions::default() };
     for (done, &clip) in clips.iter().enumerate() {
-        let aligned = evaluation_session(library, clip, options.tracking, options.observers, options.seed)?;
+        let aligned =
+            evaluation_session(library, clip, options.tracking, options.wrists, options.observers, options.seed)?;
         let gt = aligned.ground_truth.as_ref().ok_or(DatasetError::NoGroundTruth)?;
         let gt_joints: Vec<_> = gt.poses.iter().map(|p| aligned.skeleton.forward_kinematics(p).positions).collect();
         let offline = engine.reconstruct_each(&aligned, &offline_options, methods, &mut |_| true).map_err(fail)?;
-        let tracked: Vec<bool> =
-            (0..aligned.timeline.frames).map(|f| aligned.wearer_tracked(f, options.tracking)).collect();
+        let tracked: Vec<bool> = (0..aligned.timeline.frames).map(|f| aligned.wearer_tracked(f)).collect();
         for span in valid_spans(&tracked) {
             if span.len() <= max_lookahead {
                 continue;

@@ -2,7 +2,7 @@
 //! engine runs (`egoexo_infer::inputs`), written as `.npz` files PyTorch reads with numpy.
 //!
 //! Two stages, as the paper trains:
-//! - **ego** — for EgoNet: `ego [W,T,60]`, `target [W,T,132]`, `frame_mask [W,T]`,
+//! - **ego** — for EgoNet: `ego [W,T,62]`, `target [W,T,132]`, `frame_mask [W,T]`,
 //!   `rest_joints [W,24,3]`, and `subject`, `clip`, `start` `[W]` (int32).
 //! - **fusion** — everything of the ego stage plus, from a trained EgoNet run by tract:
 //!   `egonet [W,T,132]`, `rays [W,T,N,K,3]` (wearer head frame), `ray_offsets [W,T,N,K,3]`
@@ -31,6 +31,7 @@ use egoexo_infer::windows::{WINDOW, plan_windows, valid_spans};
 use egoexo_mocap::MotionLibrary;
 use egoexo_motion_io::npz::{NpzWriteError, NpzWriter};
 use egoexo_session::align::{AlignOptions, align};
+use egoexo_synth::config::{HandTrackingModel, WristTracking};
 use egoexo_synth::{SynthConfig, simulate};
 use serde::{Deserialize, Serialize};
 
@@ -39,8 +40,9 @@ use crate::DatasetError;
 /// Version of the shard format. v2 added `ray_offsets`; v3 low-passed `rays` and
 /// `ray_offsets` over each keypoint's detections (exo token layout v3); v4 stores them raw
 /// again, per frame (exo token layout v4: the fusion graph does the gate-weighted low-pass),
-/// and adds the `ray_error` labels.
-pub const SHARD_FORMAT_VERSION: u32 = 4;
+/// and adds the `ray_error` labels; v5 carries ego feature layout v2 (62 numbers: wrist
+/// validity) and may mix wrist devices with hand tracking (`options.wrists`).
+pub const SHARD_FORMAT_VERSION: u32 = 5;
 
 /// Which networks the shards train.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -50,10 +52,49 @@ pub enum ShardStage {
     Fusion,
 }
 
+/// How a simulated 3-point wearer's wrists are tracked.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WristKind {
+    /// Wrist devices on every frame.
+    #[default]
+    Devices,
+    /// The glasses' hand tracking: wrists only while in view (Aria MPS).
+    HandTracking,
+    /// Both, alternately (by clip, mirror and simulation number): training data for a model
+    /// that takes either.
+    Mixed,
+}
+
+impl WristKind {
+    /// The simulator's setting for the simulation numbered `index` (`Mixed` alternates on
+    /// its parity).
+    pub fn for_simulation(self, index: u64) -> WristTracking {
+        match self {
+            WristKind::Devices => WristTracking::Devices,
+            WristKind::HandTracking => WristTracking::HandTracking(HandTrackingModel::default()),
+            WristKind::Mixed if index % 2 == 1 => WristTracking::HandTracking(HandTrackingModel::default()),
+            WristKind::Mixed => WristTracking::Devices,
+        }
+    }
+
+    /// In words, for table titles.
+    pub fn describe(self) -> &'static str {
+        match self {
+            WristKind::Devices => "wrist devices",
+            WristKind::HandTracking => "hand-tracking wrists",
+            WristKind::Mixed => "wrist devices and hand tracking",
+        }
+    }
+}
+
 /// How to make shards.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ShardOptions {
     pub tracking: TrackingMode,
+    /// How 3-point wrists are simulated.
+    #[serde(default)]
+    pub wrists: WristKind,
     /// Observer slots `N` of the fusion network.
     pub max_observers: usize,
     /// Observers simulated per session, uniform in this inclusive range (each session draws).
@@ -73,6 +114,7 @@ impl Default for ShardOptions {
     fn default() -> Self {
         Self {
             tracking: TrackingMode::ThreePoint,
+            wrists: WristKind::Devices,
             max_observers: 3,
             observers: (1, 3),
             simulations_per_clip: 3,
@@ -246,7 +288,12 @@ pub fn write_shards(
             for s in 0..options.simulations_per_clip {
                 let seed = mix(options.seed, clip as u64, (v * 1000 + s) as u64);
                 let observers = options.observers.0 + (seed as usize % (options.observers.1 - options.observers.0 + 1));
-                let config = SynthConfig { tracking: options.tracking, observers, ..SynthConfig::default() };
+                let config = SynthConfig {
+                    tracking: options.tracking,
+                    wrists: options.wrists.for_simulation(clip as u64 + (v * 1000 + s) as u64),
+                    observers,
+                    ..SynthConfig::default()
+                };
                 let sim = simulate(motion, &info.label(), &config, seed)
                     .map_err(|e| DatasetError::Simulate(e.to_string()))?;
                 let aligned = align(&sim.session, &AlignOptions { fps: library.fps(), ..AlignOptions::default() })

@@ -7,7 +7,7 @@ use std::process::Command;
 
 use egoexo_core::TrackingMode;
 use egoexo_dataset::eval::{EvalOptions, evaluate, format_table, nearest_neighbour_index};
-use egoexo_dataset::shards::{EgoNetForShards, ShardIndex, ShardOptions, ShardStage, write_shards};
+use egoexo_dataset::shards::{EgoNetForShards, ShardIndex, ShardOptions, ShardStage, WristKind, write_shards};
 use egoexo_infer::manifest::Manifest;
 use egoexo_infer::models::ModelSet;
 use egoexo_infer::{Engine, InferError, Method};
@@ -138,7 +138,7 @@ for entry in index["shards"]:
     z = np.load(f"{folder}/{entry['file']}")
     w = entry["windows"]
     W += w
-    shapes = {"ego": (w, T, 60), "target": (w, T, 132), "frame_mask": (w, T), "rest_joints": (w, 24, 3),
+    shapes = {"ego": (w, T, 62), "target": (w, T, 132), "frame_mask": (w, T), "rest_joints": (w, 24, 3),
               "egonet": (w, T, 132), "rays": (w, T, N, K, 3), "ray_offsets": (w, T, N, K, 3),
               "ray_valid": (w, T, N, K),
               "gate_features": (w, T, N, K, 6), "observer_mask": (w, T, N), "occluded": (w, T, N, K),
@@ -186,20 +186,36 @@ print(W)
 #[test]
 fn evaluation_scores_every_method_on_all_and_occluded_frames() {
     let lib = library();
-    let engine = Engine::new().with_models(fixture_models(TrackingMode::ThreePoint)).with_nearest_neighbour(
-        TrackingMode::ThreePoint,
-        nearest_neighbour_index(&lib, &[1, 2], TrackingMode::ThreePoint, 7, 2).unwrap(),
-    );
+    let mut engine = Engine::new();
+    for mode in [TrackingMode::ThreePoint, TrackingMode::OnePoint] {
+        engine = engine
+            .with_models(fixture_models(mode))
+            .with_nearest_neighbour(mode, nearest_neighbour_index(&lib, &[1, 2], mode, 7, 2).unwrap());
+    }
     let methods =
         vec![Method::RestPose, Method::NearestNeighbour, Method::EgoOnly, Method::EgoExo, Method::EgoExoUngated];
     let options = EvalOptions {
         subjects: vec![3],
         observers: 2,
         tracking: TrackingMode::ThreePoint,
+        wrists: WristKind::Devices,
+        floor_contact: true,
+        min_head_drop_m: None,
         seed: 7,
         methods: methods.clone(),
     };
     let report = evaluate(&lib, &engine, &options, &mut |_, _| {}).unwrap();
+    assert!(report.wrist_coverage.iter().all(|&c| c > 0.98), "{:?}", report.wrist_coverage);
+    // The same clip with hand-tracking wrists: tracked only part of the time, said in the
+    // table's title, and every method still scores every frame.
+    let hands = EvalOptions { wrists: WristKind::HandTracking, ..options.clone() };
+    let hands_report = evaluate(&lib, &engine, &hands, &mut |_, _| {}).unwrap();
+    assert_eq!(hands_report.frames, 195);
+    assert!(hands_report.wrist_coverage.iter().all(|c| (0.0..1.0).contains(c)), "{:?}", hands_report.wrist_coverage);
+    // A clip whose hands never came into view reconstructs 1-point, as a real one would.
+    let no_wrists = hands_report.wrist_coverage == [0.0, 0.0];
+    assert_eq!(hands_report.one_point_clips, usize::from(no_wrists));
+    assert!(format_table(&hands_report).starts_with("3-point tracking (hand-tracking wrists: left wrist tracked on"));
     assert_eq!(report.clips, 1);
     assert_eq!(report.frames, 195);
     assert_eq!(report.rows.iter().map(|r| r.method).collect::<Vec<_>>(), methods);
@@ -279,6 +295,9 @@ fn unknown_subjects_are_a_clear_error() {
         subjects: vec![42],
         observers: 1,
         tracking: TrackingMode::OnePoint,
+        wrists: WristKind::Devices,
+        floor_contact: true,
+        min_head_drop_m: None,
         seed: 1,
         methods: vec![Method::RestPose],
     };

@@ -11,6 +11,7 @@ use std::collections::VecDeque;
 use egoexo_core::aligned::AlignedSession;
 use egoexo_core::ego_features::TrackingMode;
 use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
+use egoexo_core::foot_contact::lift_feet_above_floor;
 use egoexo_core::glam::Mat3;
 use egoexo_core::motion::SmplMotion;
 use egoexo_core::rotation::Rot6d;
@@ -180,6 +181,7 @@ pub fn assemble_reconstruction(
     tracking: TrackingMode,
     aligned: &AlignedSession,
     frames: Vec<DecodedFrame>,
+    floor_y: Option<f32>,
 ) -> Result<Reconstruction, InferError> {
     if frames.len() != aligned.timeline.frames || frames.iter().enumerate().any(|(i, f)| f.frame != i) {
         return Err(InferError::Window(format!(
@@ -191,8 +193,9 @@ pub fn assemble_reconstruction(
     let valid: Vec<bool> = frames.iter().map(|f| f.pose.is_some()).collect();
     let mut poses: Vec<Option<SmplPose>> = frames.iter().map(|f| f.pose).collect();
     fill_gaps(&mut poses);
-    let poses: Vec<SmplPose> = poses.into_iter().map(Option::unwrap_or_default).collect();
+    let mut poses: Vec<SmplPose> = poses.into_iter().map(Option::unwrap_or_default).collect();
     let skeleton = aligned.skeleton.clone();
+    let feet_lifted = floor_y.map(|y| lift_feet_above_floor(&skeleton, &mut poses, y));
     let joints = poses.iter().map(|p| skeleton.forward_kinematics(p).positions).collect();
     let gates = aligned
         .observers
@@ -213,6 +216,7 @@ pub fn assemble_reconstruction(
         valid,
         exo_evidence: frames.iter().map(|f| f.exo_evidence).collect(),
         gates,
+        feet_lifted,
     })
 }
 

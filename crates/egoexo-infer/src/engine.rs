@@ -11,6 +11,7 @@
 //! baselines (`rest-pose`, `nearest-neighbour`), natively and in the browser's worker. Units:
 //! metres, seconds; world Y-up.
 
+use egoexo_core::foot_contact::FootLift;
 use std::collections::BTreeMap;
 use std::fmt;
 
@@ -110,11 +111,15 @@ pub struct ReconstructOptions {
     pub stride: usize,
     /// The paper's evaluation protocol: non-overlapping 96-frame segments, no cross-fade.
     pub non_overlapping: bool,
+    /// Keep the feet out of the floor when the session knows its floor
+    /// ([`AlignedSession::floor_y`]): legs whose feet the networks put through it are folded
+    /// onto it ([`egoexo_core::foot_contact::lift_feet_above_floor`]).
+    pub floor_contact: bool,
 }
 
 impl Default for ReconstructOptions {
     fn default() -> Self {
-        Self { method: Method::EgoExo, tracking: None, stride: WINDOW / 2, non_overlapping: false }
+        Self { method: Method::EgoExo, tracking: None, stride: WINDOW / 2, non_overlapping: false, floor_contact: true }
     }
 }
 
@@ -166,6 +171,9 @@ pub struct Reconstruction {
     pub exo_evidence: Vec<bool>,
     /// Per observer (session order), per frame, per keypoint gate values.
     pub gates: Vec<ObserverGates>,
+    /// What the floor constraint did (`None`: not applied — no floor, or turned off).
+    #[serde(default)]
+    pub feet_lifted: Option<FootLift>,
 }
 
 impl Reconstruction {
@@ -185,6 +193,7 @@ impl Reconstruction {
                 ..self.motion.clone()
             },
             joints: self.joints[start..end].to_vec(),
+            feet_lifted: self.feet_lifted,
             valid: self.valid[slice(self.valid.len())].to_vec(),
             exo_evidence: self.exo_evidence[slice(self.exo_evidence.len())].to_vec(),
             gates: self

@@ -3,7 +3,7 @@
 //! training shards (`egoexo synth --shards`).
 //!
 //! Tensor layouts (batch 1, `T` = [`WINDOW`], `N` = observer slots, `K` = 13, row-major):
-//! - `ego` `[1, T, 60]` — [`egoexo_core::ego_features`] layout v1, window frame.
+//! - `ego` `[1, T, 62]` — [`egoexo_core::ego_features`] layout v2, window frame.
 //! - `egonet` `[1, T, 132]` — EgoNet's coarse pose in the window frame: root orientation 6D
 //!   then the 21 body rotations 6D ([`POSE_DIM`]).
 //! - `gate_features` `[1, T, N, K, F]` — [`egoexo_core::gate_features`] layout v2.
@@ -25,7 +25,7 @@
 
 use egoexo_core::aligned::AlignedSession;
 use egoexo_core::camera::CameraCalibration;
-use egoexo_core::ego_features::{EGO_FEATURE_DIM, EgoTrajectories, TrackingMode, ego_features};
+use egoexo_core::ego_features::{EGO_FEATURE_DIM, EgoTrajectories, TrackingMode, WristTrack, ego_features};
 use egoexo_core::exo_keypoints::{EXO_KEYPOINT_COUNT, exo_keypoints_from_smpl};
 use egoexo_core::gate_features::{GATE_FEATURE_DIM, detection_jumps, gate_features};
 use egoexo_core::glam::{Quat, Vec3};
@@ -59,8 +59,11 @@ fn padded<T: Copy>(frames: &[T], len: usize) -> Vec<T> {
     (0..len).map(|i| frames[i.min(frames.len() - 1)]).collect()
 }
 
-/// Ego features of one window. In 3-point mode the wrists must be tracked in every frame of
-/// the window (the planner only makes windows inside such spans).
+/// Ego features of one window. In 3-point mode each wrist reaches the features only on the
+/// frames where it is tracked (ego feature layout v2's validity slots); a wrist the session
+/// lacks is never tracked. (Asking for 3-point on a session without any wrist is refused
+/// earlier, by [`crate::plan::resolve_tracking`]; a simulated hand-tracking session whose
+/// hands were never in view is still a valid 3-point input.)
 pub fn ego_window(
     aligned: &AlignedSession,
     plan: &WindowPlan,
@@ -79,20 +82,18 @@ pub fn ego_window(
     let slice =
         |poses: &[RigidTransform]| -> Vec<RigidTransform> { padded(&poses[from..plan.frames.end], WINDOW + history) };
     let head = slice(&aligned.head.poses);
-    let wrists = match tracking {
-        TrackingMode::OnePoint => None,
-        TrackingMode::ThreePoint => {
-            let (Some(l), Some(r)) = (&aligned.left_wrist, &aligned.right_wrist) else {
-                return Err(InferError::MissingWrists);
-            };
-            Some((slice(&l.poses), slice(&r.poses)))
-        }
+    // Padding frames repeat the last real frame, validity included.
+    let wrist = |w: &Option<egoexo_core::aligned::AlignedTrajectory>| {
+        w.as_ref().map(|w| (slice(&w.poses), padded(&w.valid[from..plan.frames.end], WINDOW + history)))
     };
-    let trajectories = EgoTrajectories {
-        head: &head,
-        left_wrist: wrists.as_ref().map(|w| w.0.as_slice()),
-        right_wrist: wrists.as_ref().map(|w| w.1.as_slice()),
+    let (left, right) = match tracking {
+        TrackingMode::OnePoint => (None, None),
+        TrackingMode::ThreePoint => (wrist(&aligned.left_wrist), wrist(&aligned.right_wrist)),
     };
+    fn track(w: &Option<(Vec<RigidTransform>, Vec<bool>)>) -> Option<WristTrack<'_>> {
+        w.as_ref().map(|(poses, valid)| WristTrack { poses, valid: Some(valid) })
+    }
+    let trajectories = EgoTrajectories { head: &head, left_wrist: track(&left), right_wrist: track(&right) };
     let features = ego_features(&trajectories, history..history + WINDOW, aligned.timeline.fps, tracking)?;
     let frame_mask = (0..WINDOW).map(|i| f32::from(u8::from(i < plan.frames.len()))).collect();
     Ok(EgoWindow {

@@ -33,6 +33,8 @@ pub struct ReconstructionJob {
     pass: usize,
     /// Next window of the current pass.
     window: usize,
+    /// The floor the feet are kept above, when the options ask and the session knows it.
+    floor_y: Option<f32>,
 }
 
 impl ReconstructionJob {
@@ -68,6 +70,7 @@ impl ReconstructionJob {
             assemblers,
             pass: 0,
             window: 0,
+            floor_y: aligned.floor_y.filter(|y| options.floor_contact && y.is_finite()),
         })
     }
 
@@ -152,7 +155,7 @@ impl ReconstructionJob {
             .zip(self.assemblers)
             .map(|(&method, mut assembler)| {
                 let frames = assembler.take_frames(aligned, aligned.timeline.frames);
-                assemble_reconstruction(method, tracking, aligned, frames)
+                assemble_reconstruction(method, tracking, aligned, frames, self.floor_y)
             })
             .collect()
     }

@@ -54,7 +54,7 @@ pub enum InferError {
     NoModels { points: u8 },
     #[error("no nearest-neighbour index for {points}-point tracking")]
     NoNearestNeighbourIndex { points: u8 },
-    #[error("3-point tracking needs both wrist trajectories, and this session lacks them")]
+    #[error("3-point tracking needs a wrist trajectory (devices or hand tracking), and this session has none")]
     MissingWrists,
     #[error("the wearer's head is never tracked on the timeline: nothing to reconstruct")]
     NoValidFrames,

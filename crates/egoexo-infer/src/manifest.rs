@@ -4,7 +4,7 @@
 //! Loading refuses models trained on a different feature layout than this build computes,
 //! so a stale model can never silently receive the wrong inputs.
 
-use egoexo_core::ego_features::{EGO_FEATURE_LAYOUT_VERSION, EgoFeatureLayout, TrackingMode};
+use egoexo_core::ego_features::{EGO_FEATURE_DIM, EGO_FEATURE_LAYOUT_VERSION, EgoFeatureLayout, TrackingMode};
 use egoexo_core::gate_features::{GATE_FEATURE_LAYOUT_VERSION, GateFeatureLayout};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -124,10 +124,18 @@ impl Manifest {
                     set.lookahead.map_or("no lookahead (offline)".to_string(), |l| format!("lookahead {l}"))
                 )));
             }
-            if set.ego_feature_layout.version != EGO_FEATURE_LAYOUT_VERSION {
+            if set.ego_feature_layout.version != EGO_FEATURE_LAYOUT_VERSION
+                || set.ego_feature_layout.dim != EGO_FEATURE_DIM
+            {
+                let why = if set.ego_feature_layout.version < EGO_FEATURE_LAYOUT_VERSION {
+                    " (older models, trained before the per-frame wrist validity of v2: use the models shipped with this \
+                     build, or retrain them as training/README.md says)"
+                } else {
+                    " (models newer than this build: update egoexo)"
+                };
                 return Err(InferError::Manifest(format!(
-                    "manifest.json: {mode}-point models expect ego feature layout v{}, this build computes v{EGO_FEATURE_LAYOUT_VERSION}",
-                    set.ego_feature_layout.version
+                    "manifest.json: {mode}-point models expect ego feature layout v{} ({} numbers per frame), this build computes v{EGO_FEATURE_LAYOUT_VERSION} ({EGO_FEATURE_DIM}){why}",
+                    set.ego_feature_layout.version, set.ego_feature_layout.dim
                 )));
             }
             if set.gate_feature_layout.version != GATE_FEATURE_LAYOUT_VERSION {

@@ -35,9 +35,8 @@ impl WindowOptions {
 }
 
 /// The tracking mode to reconstruct with: `requested`, else the session's default
-/// ([`AlignedSession::tracking_mode`]: 1-point when the wrists are tracked only part of the
-/// time). 3-point without both wrist trajectories is an error; asked for with wrists tracked
-/// part of the time, it reconstructs the frames where they are.
+/// ([`AlignedSession::tracking_mode`]: 3-point whenever a wrist exists, however much of the
+/// time it is tracked). 3-point without any wrist trajectory is an error.
 pub fn resolve_tracking(aligned: &AlignedSession, requested: Option<TrackingMode>) -> Result<TrackingMode, InferError> {
     let tracking = requested.unwrap_or_else(|| aligned.tracking_mode());
     if tracking == TrackingMode::ThreePoint && !aligned.has_wrists() {
@@ -86,7 +85,7 @@ impl ReconstructionPlan {
         slots: usize,
     ) -> Result<Self, InferError> {
         let frames = aligned.timeline.frames;
-        let valid: Vec<bool> = (0..frames).map(|f| aligned.wearer_tracked(f, tracking)).collect();
+        let valid: Vec<bool> = (0..frames).map(|f| aligned.wearer_tracked(f)).collect();
         if !valid.iter().any(|&v| v) {
             return Err(InferError::NoValidFrames);
         }

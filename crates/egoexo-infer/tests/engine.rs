@@ -7,6 +7,7 @@ mod common;
 use common::*;
 use egoexo_core::TrackingMode;
 use egoexo_core::aligned::AlignedSession;
+use egoexo_core::ego_features::EGO_FEATURE_DIM;
 use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
 use egoexo_core::glam::Vec3;
 use egoexo_core::skeleton::SmplJoint;
@@ -28,7 +29,7 @@ fn nearest_index(tracking: TrackingMode) -> NearestNeighbourIndex {
     for plan in &plans {
         let window = ego_window(&training, plan, tracking).unwrap();
         let targets = window_targets(&training, &window).unwrap();
-        features.extend_from_slice(&window.ego[..plan.len() * 60]);
+        features.extend_from_slice(&window.ego[..plan.len() * EGO_FEATURE_DIM]);
         poses.extend_from_slice(&targets[..plan.len() * 132]);
     }
     NearestNeighbourIndex::build(&features, &poses).unwrap()
@@ -134,7 +135,13 @@ fn progress_counts_windows_and_cancel_stops() {
 fn non_overlapping_segments_match_the_papers_protocol() {
     let aligned = aligned_session(7.0, 1, TrackingMode::ThreePoint, 5);
     let engine = engine();
-    let options = ReconstructOptions { method: Method::EgoExo, stride: WINDOW, non_overlapping: true, tracking: None };
+    let options = ReconstructOptions {
+        method: Method::EgoExo,
+        stride: WINDOW,
+        non_overlapping: true,
+        tracking: None,
+        floor_contact: true,
+    };
     let mut ego_windows = 0;
     let r = engine
         .reconstruct(&aligned, &options, &mut |p| {
@@ -171,5 +178,45 @@ fn rest_pose_baseline_stands_upright_facing_the_head() {
         let head_forward = aligned.head.poses[f].transform_vector(Vec3::Z);
         let flat = |v: Vec3| Vec3::new(v.x, 0.0, v.z).normalize();
         assert!(flat(body_forward).dot(flat(head_forward)) > 0.999, "frame {f}");
+    }
+}
+
+/// Hand-tracking wrists that come and go: the session's default is the 3-point model, every
+/// frame the head tracks is reconstructed (not only those with wrists), and the ego features
+/// flag exactly the frames where each wrist is tracked.
+#[test]
+fn wrists_that_come_and_go_reconstruct_every_head_frame_in_3_point() {
+    use egoexo_infer::inputs::ego_window;
+    use egoexo_infer::windows::{WINDOW, plan_windows, valid_spans};
+    use egoexo_session::{AlignOptions, align};
+    use egoexo_synth::config::{HandTrackingModel, WristTracking};
+    use egoexo_synth::procedural::walking_circle;
+    use egoexo_synth::{SynthConfig, simulate};
+
+    // The procedural walker's hands hang at its sides, at the edge of Aria's view: a wider
+    // view cone sees them as they swing forward, part of the time.
+    let wide = HandTrackingModel { view_half_angle_rad: 75f32.to_radians(), ..HandTrackingModel::default() };
+    let config = SynthConfig { observers: 1, wrists: WristTracking::HandTracking(wide), ..SynthConfig::default() };
+    let sim = simulate(&walking_circle(8.0), "walk", &config, 11).unwrap();
+    let aligned = align(&sim.session, &AlignOptions::default()).unwrap();
+    let coverage = aligned.wrist_coverage();
+    assert!(coverage.iter().flatten().any(|&c| c > 0.05 && c < 0.98), "{coverage:?}");
+    let choice = aligned.tracking_choice();
+    assert_eq!(choice.mode, TrackingMode::ThreePoint);
+    assert!(choice.reason.is_some());
+
+    let recon = run(&engine(), &aligned, Method::EgoExo);
+    assert_eq!(recon.tracking, TrackingMode::ThreePoint);
+    assert!(recon.valid.iter().all(|&v| v), "every head frame is reconstructed");
+
+    let plan = &plan_windows(&valid_spans(&aligned.head.valid), WINDOW, true)[0];
+    let window = ego_window(&aligned, plan, TrackingMode::ThreePoint).unwrap();
+    for t in 0..plan.len() {
+        let row = &window.ego[t * EGO_FEATURE_DIM..(t + 1) * EGO_FEATURE_DIM];
+        let frame = plan.frames.start + t;
+        for (wrist, slot) in [(&aligned.left_wrist, 60), (&aligned.right_wrist, 61)] {
+            let tracked = wrist.as_ref().is_some_and(|w| w.valid[frame]);
+            assert_eq!(row[slot], f32::from(u8::from(tracked)), "frame {frame} slot {slot}");
+        }
     }
 }

@@ -77,9 +77,20 @@ fn a_tampered_model_file_is_refused() {
 #[test]
 fn a_manifest_from_another_feature_layout_is_refused() {
     let text = std::fs::read_to_string(fixture_dir().join("manifest.json")).unwrap();
-    let stale = text.replacen("\"version\": 1", "\"version\": 99", 1);
-    let err = egoexo_infer::manifest::Manifest::from_json(stale.as_bytes()).unwrap_err();
-    assert!(err.to_string().contains("layout v99"), "{err}");
+    let with_layout = |version: u32, dim: usize| {
+        let mut manifest: serde_json::Value = serde_json::from_str(&text).unwrap();
+        for set in manifest["model_sets"].as_array_mut().unwrap() {
+            set["ego_feature_layout"]["version"] = version.into();
+            set["ego_feature_layout"]["dim"] = dim.into();
+        }
+        egoexo_infer::manifest::Manifest::from_json(manifest.to_string().as_bytes()).unwrap_err().to_string()
+    };
+    // Models from before per-frame wrist validity (layout v1, 60 numbers).
+    let old = with_layout(1, 60);
+    assert!(old.contains("expect ego feature layout v1 (60 numbers per frame), this build computes v2 (62)"), "{old}");
+    assert!(old.contains("trained before the per-frame wrist validity") && old.contains("retrain"), "{old}");
+    let newer = with_layout(99, 62);
+    assert!(newer.contains("layout v99") && newer.contains("update egoexo"), "{newer}");
 }
 
 #[test]

@@ -520,7 +520,8 @@ pub struct SessionSummary {
     pub devices: Vec<String>,
     /// 1 (glasses) or 3 (glasses + both wrists): the model a reconstruction uses by default.
     pub tracking_points: u8,
-    /// Why the session reconstructs with the 1-point model although it has wrists.
+    /// How the 3-point model uses wrists that are tracked only part of the time (hand
+    /// tracking), or that only one wrist exists; `None` when the wrists are complete or absent.
     #[serde(default)]
     pub tracking_reason: Option<String>,
     /// Per wrist the session has: where it comes from and how much of the timeline it covers.

@@ -373,7 +373,8 @@ fn hand_tracking_in_every_form_gives_wrists_that_come_and_go() {
                 }
             }
         }
-        // On the timeline: untracked while out of view, and so the 1-point model, with the reason.
+        // On the timeline: untracked while out of view; the 3-point model reads them where
+        // they are, with a note on how much of the time that is.
         let aligned = align(&imported.session, &AlignOptions::default()).unwrap();
         let frame = |t: f64| ((t * 30.0).round()) as usize;
         let left = aligned.left_wrist.as_ref().unwrap();
@@ -381,9 +382,12 @@ fn hand_tracking_in_every_form_gives_wrists_that_come_and_go() {
         assert!(!left.valid[frame(1.0)] && left.valid[frame(0.5)] && left.valid[frame(1.6)]);
         assert!(!right.valid[frame(0.35)] && right.valid[frame(1.0)]);
         let choice = aligned.tracking_choice();
-        assert_eq!(choice.mode, TrackingMode::OnePoint);
+        assert_eq!(choice.mode, TrackingMode::ThreePoint);
         let reason = choice.reason.unwrap();
-        assert!(reason.contains("tracked on only") && reason.contains("(left)"), "{reason}");
+        assert!(
+            reason.contains("tracked on") && reason.contains("(left)") && reason.contains("where they are"),
+            "{reason}"
+        );
         // Kept through .egoexo.
         let zip = write_egoexo_zip(&imported.session).unwrap();
         let back =

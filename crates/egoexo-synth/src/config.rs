@@ -11,6 +11,10 @@ use serde::{Deserialize, Serialize};
 pub struct SynthConfig {
     /// Wearer devices: glasses only (1-point) or glasses + wrists (3-point).
     pub tracking: TrackingMode,
+    /// How the wrists of a 3-point wearer are tracked: wrist devices on every frame, or the
+    /// glasses' own hand tracking while the hands are in view.
+    #[serde(default)]
+    pub wrists: WristTracking,
     /// Number of observers (1 or more).
     pub observers: usize,
     pub wearer_noise: DeviceNoise,
@@ -25,6 +29,7 @@ impl Default for SynthConfig {
     fn default() -> Self {
         Self {
             tracking: TrackingMode::ThreePoint,
+            wrists: WristTracking::Devices,
             observers: 1,
             wearer_noise: DeviceNoise::default(),
             observer_noise: DeviceNoise::default(),
@@ -32,6 +37,61 @@ impl Default for SynthConfig {
             camera: CameraChoice::default(),
             detector: DetectorModel::default(),
             occlusion: OcclusionConfig::default(),
+        }
+    }
+}
+
+/// How a 3-point wearer's wrists are tracked.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WristTracking {
+    /// Wrist devices (wristbands, controllers): a pose on every frame, with device noise.
+    #[default]
+    Devices,
+    /// The glasses' hand tracking (Aria MPS): a wrist only while it is inside the head
+    /// cameras' view, with detection noise, short dropouts and a confidence.
+    HandTracking(HandTrackingModel),
+}
+
+/// Aria-like hand tracking from the glasses' own cameras. Angles in radians, lengths in
+/// metres, times in seconds; directions in the glasses' CPF frame (+X left, +Y up,
+/// +Z forward).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HandTrackingModel {
+    /// The cameras' joint viewing axis: forward, pitched down by this much (Aria's SLAM
+    /// cameras look forward-down, where hands work).
+    pub view_axis_pitch_down_rad: f32,
+    /// Half-angle of the cone about that axis inside which a wrist can be seen.
+    pub view_half_angle_rad: f32,
+    /// Wrists nearer or farther than this from the glasses are not tracked.
+    pub distance_m: (f32, f32),
+    /// Confidence of a seen wrist: 1 on the axis, falling to 0 at the cone's edge as
+    /// `1 − (angle / half-angle)^4`, with normal noise of this standard deviation.
+    pub confidence_noise: f32,
+    /// Samples below this confidence are not reported (MPS writes −1 for them).
+    pub min_confidence: f32,
+    /// Mean time between spontaneous dropouts while a wrist is in view, and their length
+    /// (uniform range).
+    pub dropout_interval_s: f32,
+    pub dropout_duration_s: (f32, f32),
+    /// White detection noise of a reported wrist: position (standard deviation, m) and
+    /// orientation (rad), on top of the glasses' own tracking error.
+    pub position_noise_m: f32,
+    pub orientation_noise_rad: f32,
+}
+
+impl Default for HandTrackingModel {
+    fn default() -> Self {
+        Self {
+            view_axis_pitch_down_rad: 35f32.to_radians(),
+            view_half_angle_rad: 50f32.to_radians(),
+            distance_m: (0.12, 0.95),
+            confidence_noise: 0.05,
+            min_confidence: 0.15,
+            dropout_interval_s: 4.0,
+            dropout_duration_s: (0.1, 0.5),
+            position_noise_m: 0.01,
+            orientation_noise_rad: 5f32.to_radians(),
         }
     }
 }

@@ -7,19 +7,23 @@ use egoexo_core::motion::SmplMotion;
 use egoexo_core::rigid::RigidTransform;
 use egoexo_core::skeleton::{DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE, SmplJoint, SmplSkeleton};
 use egoexo_session::model::{
-    Floor, FloorSource, GroundTruth, KeypointTrack, Observer, ObserverOcclusion, Session, SubjectInfo, Trajectory,
-    Wearer, WristSource,
+    Floor, FloorSource, GroundTruth, HandTrackingForm, KeypointTrack, Observer, ObserverOcclusion, Session,
+    SubjectInfo, Trajectory, Wearer, WristOrientation, WristSource,
 };
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::cameras::{aria_rgb_camera, wide_pinhole_camera};
 use crate::config::SynthConfig;
+use crate::config::WristTracking;
 use crate::detector::{DetectorState, coco17_points, detect};
-use crate::devices::{add_tracking_noise, glasses_pose};
+use crate::devices::{add_tracking_noise, glasses_pose, simulate_hand_tracking};
 use crate::observers::simulate_observer;
 use crate::rng::SimRng;
 use crate::scene::{Bystander, Furniture, Scene};
+
+/// The file name a simulated hand-tracking wrist source reports.
+pub const SIMULATED_HAND_TRACKING: &str = "simulated hand tracking";
 
 /// Errors simulating a session.
 #[derive(Debug, Error)]
@@ -93,24 +97,44 @@ pub fn simulate(
         (0..fk.len()).map(|f| glasses_pose(&joint_pose(f, SmplJoint::Head), head_joint_in_device)).collect();
     let mut wearer_rng = rng.fork(1);
     let head = add_tracking_noise(&true_head, fps, &config.wearer_noise, &mut wearer_rng);
+    let mut wrist_source = WristSource::Devices;
     let (left_wrist, right_wrist) = match config.tracking {
         TrackingMode::OnePoint => (None, None),
         TrackingMode::ThreePoint => {
             let mut side = |j: SmplJoint| {
                 let truth: Vec<_> = (0..fk.len()).map(|f| joint_pose(f, j)).collect();
-                Trajectory {
-                    timestamps_ns: timestamps.clone(),
-                    poses: add_tracking_noise(&truth, fps, &config.wearer_noise, &mut wearer_rng),
+                match &config.wrists {
+                    WristTracking::Devices => Trajectory {
+                        timestamps_ns: timestamps.clone(),
+                        poses: add_tracking_noise(&truth, fps, &config.wearer_noise, &mut wearer_rng),
+                    },
+                    WristTracking::HandTracking(model) => {
+                        let seen = simulate_hand_tracking(&head, &true_head, &truth, fps, model, &mut wearer_rng);
+                        Trajectory {
+                            timestamps_ns: seen.frames.iter().map(|&f| timestamps[f]).collect(),
+                            poses: seen.poses,
+                        }
+                    }
                 }
             };
-            (Some(side(SmplJoint::LeftWrist)), Some(side(SmplJoint::RightWrist)))
+            let wrists = (side(SmplJoint::LeftWrist), side(SmplJoint::RightWrist));
+            if let WristTracking::HandTracking(_) = &config.wrists {
+                wrist_source = WristSource::HandTracking {
+                    file: SIMULATED_HAND_TRACKING.to_owned(),
+                    form: HandTrackingForm::HandTrackingResults,
+                    orientation: WristOrientation::FromWristPose,
+                };
+            }
+            // A hand never seen leaves no trajectory, as in a real recording.
+            let kept = |t: Trajectory| (!t.timestamps_ns.is_empty()).then_some(t);
+            (kept(wrists.0), kept(wrists.1))
         }
     };
     let wearer = Wearer {
         head: Trajectory { timestamps_ns: timestamps.clone(), poses: head },
         left_wrist,
         right_wrist,
-        wrist_source: WristSource::Devices,
+        wrist_source,
         head_joint_in_device,
     };
 

@@ -392,3 +392,53 @@ fn several_observers_get_distinct_ids_cameras_and_views() {
     assert_ne!(sim.true_observer_heads[0][0].translation, sim.true_observer_heads[1][0].translation);
     let _ = (RigidTransform::IDENTITY, coco17_points);
 }
+
+/// Hand tracking from the glasses: a wrist is reported only where it was inside the view
+/// cone, at its true place within the detection noise, on a subset of the head's
+/// timestamps; a wrist held in front of the face is seen almost always, a wrist hanging at
+/// the side almost never.
+#[test]
+fn hand_tracking_reports_wrists_only_inside_the_glasses_view() {
+    use egoexo_core::glam::Quat;
+    use egoexo_session::model::WristSource;
+    use egoexo_synth::config::{HandTrackingModel, WristTracking};
+    use egoexo_synth::devices::simulate_hand_tracking;
+    use egoexo_synth::rng::SimRng;
+
+    let model = HandTrackingModel::default();
+    let fps = 30.0;
+    let glasses = vec![RigidTransform::from_translation(Vec3::new(0.0, 1.6, 0.0)); 300];
+    // CPF: +Z forward, +Y up, +X left. In front and below the eyes: in view.
+    let front = vec![RigidTransform::new(Quat::IDENTITY, Vec3::new(0.05, 1.3, 0.35)); 300];
+    // Hanging at the side, beside the hip: out of view.
+    let side = vec![RigidTransform::new(Quat::IDENTITY, Vec3::new(0.25, 0.85, 0.0)); 300];
+    let mut rng = SimRng::new(3);
+    let seen_front = simulate_hand_tracking(&glasses, &glasses, &front, fps, &model, &mut rng);
+    let seen_side = simulate_hand_tracking(&glasses, &glasses, &side, fps, &model, &mut rng);
+    let front_fraction = seen_front.frames.len() as f32 / 300.0;
+    assert!((0.85..1.0).contains(&front_fraction), "in front: seen on {front_fraction} of frames (dropouts only)");
+    assert!(seen_side.frames.is_empty(), "at the side: seen on {} frames", seen_side.frames.len());
+    for (pose, c) in seen_front.poses.iter().zip(&seen_front.confidence) {
+        assert!(pose.translation.distance(front[0].translation) < 0.05);
+        assert!((model.min_confidence..=1.0).contains(c));
+    }
+
+    // In a simulated session: the wrists are a subset of the head's frames, marked as hand
+    // tracking; a walking wearer's swinging hands are seen only part of the time (the
+    // procedural walker's hands hang at the edge of Aria's view; a wider cone sees them swing
+    // forward).
+    let motion = walking_circle(8.0);
+    let wide = HandTrackingModel { view_half_angle_rad: 75f32.to_radians(), ..model };
+    let config = SynthConfig { wrists: WristTracking::HandTracking(wide), ..SynthConfig::default() };
+    let sim = simulate(&motion, "clip", &config, 5).unwrap();
+    let wearer = &sim.session.wearer;
+    assert!(matches!(wearer.wrist_source, WristSource::HandTracking { .. }));
+    let head_times = &wearer.head.timestamps_ns;
+    assert!(wearer.left_wrist.is_some() || wearer.right_wrist.is_some(), "a hand is seen at some point");
+    for wrist in [&wearer.left_wrist, &wearer.right_wrist].into_iter().flatten() {
+        assert!(wrist.timestamps_ns.iter().all(|t| head_times.binary_search(t).is_ok()));
+        assert!(wrist.timestamps_ns.len() < head_times.len(), "a walking wearer's wrist is not always in view");
+    }
+    let devices = simulate(&motion, "clip", &SynthConfig::default(), 5).unwrap();
+    assert_eq!(devices.session.wearer.left_wrist.as_ref().unwrap().timestamps_ns.len(), head_times.len());
+}

@@ -176,13 +176,10 @@ impl LiveReconstructor {
         // which was trained without observers.
         let has_exo = aligned.observers.iter().any(|o| o.keypoints[index].iter().any(Option::is_some));
         let method = if has_exo { Method::EgoExo } else { Method::EgoOnly };
-        // 3-point while both wrist devices are tracked at the frame shown. (The session-wide
-        // rule, `AlignedSession::tracking_choice`, would see a window's edges — wrists arriving
-        // a sample after the head — as wrists that come and go.)
-        let wrists_now = [&aligned.left_wrist, &aligned.right_wrist]
-            .iter()
-            .all(|w| w.as_ref().is_some_and(|w| w.valid.get(index).copied().unwrap_or(false)));
-        let tracking = if wrists_now { TrackingMode::ThreePoint } else { TrackingMode::OnePoint };
+        // 3-point whenever a wrist device is connected: the network reads, frame by frame,
+        // which wrists are tracked (ego feature layout v2), so a wrist arriving a sample after
+        // the head or dropping out for a moment is simply untracked on those frames.
+        let tracking = if aligned.has_wrists() { TrackingMode::ThreePoint } else { TrackingMode::OnePoint };
         let options =
             ReconstructOptions { method, tracking: Some(tracking), stride: WINDOW, ..ReconstructOptions::default() };
         let recon = engine.reconstruct(&aligned, &options, &mut |_| true)?;

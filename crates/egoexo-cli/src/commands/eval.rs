@@ -3,9 +3,11 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
+use egoexo_core::TrackingMode;
 use egoexo_dataset::eval::{
     EvalOptions, LIVE_LOOKAHEADS, evaluate, evaluate_live, format_live_table, format_table, nearest_neighbour_index,
 };
+use egoexo_dataset::shards::WristKind;
 use egoexo_infer::{Engine, Method};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -22,6 +24,14 @@ pub struct Args {
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Score the networks without the floor constraint (feet the networks put through the
+    /// floor stay there): the "before" of the feet table.
+    #[arg(long)]
+    pub no_floor_contact: bool,
+    /// Only the clips where the head drops at least this far (metres) below the subject's
+    /// standing head height: crouching, kneeling, sitting.
+    #[arg(long, value_name = "METRES")]
+    pub head_drop: Option<f32>,
     /// The live table instead: ego-only and ego-exo read out each lookahead before their
     /// window's end, as the page reconstructs live, against the offline result (needs --models);
     /// by the offline networks and, where the manifest ships one, the live variant trained for
@@ -58,6 +68,9 @@ pub fn run(args: Args) -> Result<()> {
             subjects: sim.subjects.clone(),
             observers: sim.observers,
             tracking,
+            wrists: sim.wrists(),
+            floor_contact: !args.no_floor_contact,
+            min_head_drop_m: args.head_drop,
             seed: sim.seed,
             methods: vec![Method::EgoOnly, Method::EgoExo],
         };
@@ -74,21 +87,36 @@ pub fn run(args: Args) -> Result<()> {
     if training.is_empty() {
         bail!("every subject of the library is being evaluated; the nearest-neighbour baseline needs other subjects");
     }
-    let engine = Engine::new()
-        .with_nearest_neighbour(tracking, nearest_neighbour_index(&library, &training, tracking, sim.seed, 2)?);
-    let mut methods = vec![Method::RestPose, Method::NearestNeighbour];
-    let engine = match &args.models {
-        Some(dir) => {
-            let manifest = read_manifest(dir)?;
-            let set = load_model_set(dir, &manifest, tracking)?
-                .with_context(|| format!("{} has no {}-point models", dir.display(), tracking.points()))?;
-            methods.extend([Method::EgoOnly, Method::EgoExo, Method::EgoExoUngated]);
-            engine.with_models(set)
-        }
-        None => engine,
+    // Hand-tracking wrists: a clip whose hands never came into view has no wrists and is
+    // reconstructed 1-point, as a real session would be; so both modes are loaded.
+    let modes = match sim.wrists() {
+        WristKind::HandTracking | WristKind::Mixed => vec![tracking, TrackingMode::OnePoint],
+        WristKind::Devices => vec![tracking],
     };
-    let options =
-        EvalOptions { subjects: sim.subjects.clone(), observers: sim.observers, tracking, seed: sim.seed, methods };
+    let mut engine = Engine::new();
+    for &mode in &modes {
+        engine = engine.with_nearest_neighbour(mode, nearest_neighbour_index(&library, &training, mode, sim.seed, 2)?);
+    }
+    let mut methods = vec![Method::RestPose, Method::NearestNeighbour];
+    if let Some(dir) = &args.models {
+        let manifest = read_manifest(dir)?;
+        for &mode in &modes {
+            let set = load_model_set(dir, &manifest, mode)?
+                .with_context(|| format!("{} has no {}-point models", dir.display(), mode.points()))?;
+            engine = engine.with_models(set);
+        }
+        methods.extend([Method::EgoOnly, Method::EgoExo, Method::EgoExoUngated]);
+    }
+    let options = EvalOptions {
+        subjects: sim.subjects.clone(),
+        observers: sim.observers,
+        tracking,
+        wrists: sim.wrists(),
+        floor_contact: !args.no_floor_contact,
+        min_head_drop_m: args.head_drop,
+        seed: sim.seed,
+        methods,
+    };
     let report = evaluate(&library, &engine, &options, &mut progress)?;
     bar.finish_and_clear();
     if args.json {

@@ -58,7 +58,7 @@ pub fn run(args: Args) -> Result<()> {
     if args.tracking.is_none()
         && let Some(reason) = aligned.tracking_choice().reason
     {
-        eprintln!("note: reconstructing with the 1-point model: {reason}");
+        eprintln!("note: 3-point with wrists that come and go: {reason}");
     }
     let dir = models_dir(args.models.as_deref());
     let manifest = read_manifest(&dir)?;

@@ -22,7 +22,9 @@ pub struct SimulationArgs {
     /// slots).
     #[arg(long, default_value_t = 1)]
     pub observers: usize,
-    /// Wearer tracking: 1 (glasses) or 3 (glasses + wrists).
+    /// Wearer tracking: 1 (glasses), 3 (glasses + wrist devices), 3-hand-tracking (the
+    /// glasses' own hand tracking: wrists only while in view; alias 3-intermittent) or
+    /// 3-mixed (simulations alternate between the two kinds of wrists; for training shards).
     #[arg(long, value_enum, default_value = "3")]
     pub tracking: TrackingArg,
     /// Seed of the simulations (and of everything else random in the command).
@@ -34,6 +36,11 @@ impl SimulationArgs {
     /// Opens `--lib`.
     pub fn open_library(&self) -> Result<MotionLibrary> {
         egoexo_mocap::fs::open_library(&self.lib).with_context(|| format!("opening {}", self.lib.display()))
+    }
+
+    /// How `--tracking` simulates the wrists.
+    pub fn wrists(&self) -> egoexo_dataset::shards::WristKind {
+        self.tracking.wrists()
     }
 
     /// `--tracking` as the core's mode.

@@ -120,6 +120,7 @@ pub fn run(args: Args) -> Result<()> {
         };
         let options = ShardOptions {
             tracking,
+            wrists: sim.wrists(),
             max_observers: sim.observers.max(1),
             observers: (0, sim.observers.max(1)),
             simulations_per_clip: args.simulations.max(1),
@@ -155,8 +156,13 @@ pub fn run(args: Args) -> Result<()> {
     }
 
     bar.set_message("sessions");
-    let config = SynthConfig { tracking, observers: sim.observers, ..SynthConfig::default() };
     for (i, &clip) in clips.iter().enumerate() {
+        let config = SynthConfig {
+            tracking,
+            wrists: sim.wrists().for_simulation(i as u64),
+            observers: sim.observers,
+            ..SynthConfig::default()
+        };
         let info = &library.clips()[clip];
         let motion = library.motion(clip)?;
         let name = info.label().replace('/', "-");

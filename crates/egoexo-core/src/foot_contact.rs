@@ -67,7 +67,7 @@ pub fn lift_feet_above_floor(skeleton: &SmplSkeleton, poses: &mut [SmplPose], fl
         let mut changed = false;
         for (hip, knee, ankle, foot) in LEGS {
             let lift = floor_y + sole - p[ankle].y.min(p[foot].y);
-            if !(lift > 1e-4) {
+            if lift.is_nan() || lift <= 1e-4 {
                 continue;
             }
             let (h, k, a) = (p[hip], p[knee], p[ankle]);

@@ -111,6 +111,6 @@ fn windows_one_at_a_time_give_the_batch_reconstruction_frame_by_frame() {
     let late = ego_pass(&aligned, &plan.windows[0], tracking, CoarsePoseSource::RestPose).unwrap();
     assert!(assembler.add(&egoexo_infer::passes::WindowOutput::from_coarse(&late)).is_err());
 
-    let streamed = assemble_reconstruction(Method::EgoExo, tracking, &aligned, frames).unwrap();
+    let streamed = assemble_reconstruction(Method::EgoExo, tracking, &aligned, frames, aligned.floor_y).unwrap();
     assert_eq!(streamed, batch);
 }

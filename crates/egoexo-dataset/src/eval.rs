@@ -13,7 +13,7 @@
 use egoexo_core::TrackingMode;
 use egoexo_core::aligned::AlignedSession;
 use egoexo_core::ego_features::EGO_FEATURE_DIM;
-use egoexo_core::foot_contact::{FOOT_JOINT_ABOVE_SOLE_M, FootContactAccumulator, FootContactMetrics};
+use egoexo_core::foot_contact::{FOOT_JOINTS, FootContactAccumulator, FootContactMetrics, sole_offset_m};
 use egoexo_core::metrics::{MetricsAccumulator, MotionMetrics};
 use egoexo_infer::baselines::NearestNeighbourIndex;
 use egoexo_infer::inputs::{POSE_DIM, ego_window, window_targets};
@@ -218,8 +218,9 @@ fn paired_comparisons(methods: &[Method], per_clip: &[ClipMetrics], seed: u64) -
 /// (its lowest foot joint over the whole clip), so a crouch counts and a jump does not.
 pub fn head_drop_m(motion: &egoexo_core::motion::SmplMotion) -> f32 {
     let fk: Vec<_> = motion.poses.iter().map(|p| motion.skeleton.forward_kinematics(p).positions).collect();
-    let floor = fk.iter().flat_map(|p| [7, 8, 10, 11].map(|j| p[j].y)).fold(f32::INFINITY, f32::min);
-    let lowest_head = fk.iter().map(|p| p[15].y).fold(f32::INFINITY, f32::min);
+    let floor = fk.iter().flat_map(|p| FOOT_JOINTS.map(|j| p[j].y)).fold(f32::INFINITY, f32::min);
+    let head = egoexo_core::skeleton::SmplJoint::Head.index();
+    let lowest_head = fk.iter().map(|p| p[head].y).fold(f32::INFINITY, f32::min);
     motion.skeleton.head_height() - (lowest_head - floor)
 }
 
@@ -338,8 +339,7 @@ pub fn evaluate(
         // The simulator's floor; soles sit below the foot joints in proportion to the body.
         let floor_y =
             aligned.floor_y.ok_or_else(|| DatasetError::Options("a simulated session without a floor".into()))?;
-        let sole_offset = FOOT_JOINT_ABOVE_SOLE_M * aligned.skeleton.head_height()
-            / egoexo_core::skeleton::SmplSkeleton::mean_shape().head_height();
+        let sole_offset = sole_offset_m(&aligned.skeleton);
         for segment in &segments {
             let range = segment.frames.clone();
             let (joints, fps) = (&gt_joints[range.clone()], aligned.timeline.fps);

@@ -64,16 +64,7 @@ pub fn run(args: Args) -> Result<()> {
         if models.offline().models(tracking).is_none() {
             bail!("{} has no {}-point models", dir.display(), tracking.points());
         }
-        let options = EvalOptions {
-            subjects: sim.subjects.clone(),
-            observers: sim.observers,
-            tracking,
-            wrists: sim.wrists(),
-            floor_contact: !args.no_floor_contact,
-            min_head_drop_m: args.head_drop,
-            seed: sim.seed,
-            methods: vec![Method::EgoOnly, Method::EgoExo],
-        };
+        let options = eval_options(&args, vec![Method::EgoOnly, Method::EgoExo]);
         let report = evaluate_live(&library, &models, &options, &args.lookaheads, &mut progress)?;
         bar.finish_and_clear();
         if args.json {
@@ -107,16 +98,7 @@ pub fn run(args: Args) -> Result<()> {
         }
         methods.extend([Method::EgoOnly, Method::EgoExo, Method::EgoExoUngated]);
     }
-    let options = EvalOptions {
-        subjects: sim.subjects.clone(),
-        observers: sim.observers,
-        tracking,
-        wrists: sim.wrists(),
-        floor_contact: !args.no_floor_contact,
-        min_head_drop_m: args.head_drop,
-        seed: sim.seed,
-        methods,
-    };
+    let options = eval_options(&args, methods);
     let report = evaluate(&library, &engine, &options, &mut progress)?;
     bar.finish_and_clear();
     if args.json {
@@ -128,4 +110,19 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// What `args` ask to evaluate, with `methods`.
+fn eval_options(args: &Args, methods: Vec<Method>) -> EvalOptions {
+    let sim = &args.simulation;
+    EvalOptions {
+        subjects: sim.subjects.clone(),
+        observers: sim.observers,
+        tracking: sim.tracking_mode(),
+        wrists: sim.wrists(),
+        floor_contact: !args.no_floor_contact,
+        min_head_drop_m: args.head_drop,
+        seed: sim.seed,
+        methods,
+    }
 }

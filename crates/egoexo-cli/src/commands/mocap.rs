@@ -235,27 +235,52 @@ fn info(args: InfoArgs) -> Result<()> {
     Ok(())
 }
 
-/// The retarget error per data source (ASF/AMC, each BVH conversion).
+/// One data source's share of a library and its retarget error.
+struct SourceRow {
+    source: String,
+    subjects: Vec<u32>,
+    clips: usize,
+    frames: u64,
+    error: egoexo_mocap::RetargetSummary,
+}
+
+/// The library's clips grouped by data source (ASF/AMC, each BVH conversion).
+fn source_rows(library: &MotionLibrary) -> Vec<SourceRow> {
+    library
+        .clips_by_source_format()
+        .into_iter()
+        .map(|(source, clips)| {
+            let mut subjects: Vec<u32> = clips.iter().map(|&c| library.clips()[c].subject).collect();
+            subjects.sort_unstable();
+            subjects.dedup();
+            SourceRow {
+                source,
+                subjects,
+                clips: clips.len(),
+                frames: clips.iter().map(|&c| u64::from(library.clips()[c].frames)).sum(),
+                error: library.retarget_summary(&clips),
+            }
+        })
+        .collect()
+}
+
+/// The retarget error per data source.
 fn print_sources(library: &MotionLibrary) {
     println!();
     println!(
         "{:<36} {:>8} {:>6} {:>8} {:>8} {:>7} {:>7}",
         "source", "subjects", "clips", "minutes", "mean cm", "p95 cm", "max cm"
     );
-    for (source, clips) in library.clips_by_source_format() {
-        let s = library.retarget_summary(&clips);
-        let frames: u64 = clips.iter().map(|&c| u64::from(library.clips()[c].frames)).sum();
-        let mut subjects: Vec<u32> = clips.iter().map(|&c| library.clips()[c].subject).collect();
-        subjects.sort_unstable();
-        subjects.dedup();
+    for row in source_rows(library) {
         println!(
-            "{source:<36} {:>8} {:>6} {:>8.2} {:>8.2} {:>7.2} {:>7.2}",
-            subjects.len(),
-            clips.len(),
-            frames as f64 / f64::from(library.fps()) / 60.0,
-            s.mean_cm,
-            s.p95_cm,
-            s.max_cm
+            "{:<36} {:>8} {:>6} {:>8.2} {:>8.2} {:>7.2} {:>7.2}",
+            row.source,
+            row.subjects.len(),
+            row.clips,
+            row.frames as f64 / f64::from(library.fps()) / 60.0,
+            row.error.mean_cm,
+            row.error.p95_cm,
+            row.error.max_cm
         );
     }
 }
@@ -292,23 +317,17 @@ fn info_json(library: &MotionLibrary, path: &Path) -> serde_json::Value {
             })
         })
         .collect();
-    let sources: Vec<serde_json::Value> = library
-        .clips_by_source_format()
+    let sources: Vec<serde_json::Value> = source_rows(library)
         .into_iter()
-        .map(|(source, clips)| {
-            let s = library.retarget_summary(&clips);
-            let frames: u64 = clips.iter().map(|&c| u64::from(library.clips()[c].frames)).sum();
-            let mut subjects: Vec<u32> = clips.iter().map(|&c| library.clips()[c].subject).collect();
-            subjects.sort_unstable();
-            subjects.dedup();
+        .map(|row| {
             serde_json::json!({
-                "source": source,
-                "subjects": subjects,
-                "clips": clips.len(),
-                "frames": frames,
-                "retarget_mean_cm": s.mean_cm,
-                "retarget_p95_cm": s.p95_cm,
-                "retarget_max_cm": s.max_cm,
+                "source": row.source,
+                "subjects": row.subjects,
+                "clips": row.clips,
+                "frames": row.frames,
+                "retarget_mean_cm": row.error.mean_cm,
+                "retarget_p95_cm": row.error.p95_cm,
+                "retarget_max_cm": row.error.max_cm,
             })
         })
         .collect();

@@ -76,6 +76,62 @@ impl Rot6d {
     pub fn is_finite(&self) -> bool {
         self.0.iter().all(|v| v.is_finite())
     }
+
+    /// How much orientation the raw columns carry: the shorter of the first column and the
+    /// part of the second perpendicular to it, before Gram–Schmidt normalises them (about 1 for
+    /// a confident network output, 0 for a degenerate one; 0 when not finite).
+    pub fn column_strength(&self) -> f32 {
+        if !self.is_finite() {
+            return 0.0;
+        }
+        let (a1, a2) = self.columns();
+        let len1 = a1.length();
+        if len1 <= DEGENERATE_EPS {
+            return 0.0;
+        }
+        let b1 = a1 / len1;
+        len1.min((a2 - b1.dot(a2) * b1).length())
+    }
+}
+
+/// Column strength ([`Rot6d::column_strength`]) below which a network's 6D output is read as
+/// carrying no orientation. A regressed 6D output that has to turn far within a few frames
+/// (a wearer turning fast, where the network hesitates between turning left and right)
+/// shrinks towards the origin, and Gram–Schmidt then swings the decoded rotation through
+/// the turn within a frame or two.
+pub const COLLAPSED_6D_STRENGTH: f32 = 0.3;
+
+/// Replaces the collapsed rotations of a time series (column strength below `min_strength`)
+/// by the geodesic interpolation (slerp, shortest arc) between the nearest strong rotations
+/// before and after them; a collapsed run at either end takes its one strong neighbour. A
+/// series without any strong rotation is left as it is. Replaced rotations have unit
+/// columns. Returns how many were replaced.
+pub fn interpolate_collapsed_6d(series: &mut [Rot6d], min_strength: f32) -> usize {
+    let strong: Vec<usize> = (0..series.len()).filter(|&t| series[t].column_strength() >= min_strength).collect();
+    let (Some(&first), Some(&last)) = (strong.first(), strong.last()) else { return 0 };
+    let mut replaced = 0;
+    for t in 0..series.len() {
+        if series[t].column_strength() >= min_strength {
+            continue;
+        }
+        let quat = if t < first {
+            series[first].to_quat()
+        } else if t > last {
+            series[last].to_quat()
+        } else {
+            // `strong` is sorted and `first < t < last`: the neighbours exist.
+            let after = strong[strong.partition_point(|&s| s < t)];
+            let before = strong[strong.partition_point(|&s| s < t) - 1];
+            let (q0, mut q1) = (series[before].to_quat(), series[after].to_quat());
+            if q0.dot(q1) < 0.0 {
+                q1 = -q1;
+            }
+            q0.slerp(q1, (t - before) as f32 / (after - before) as f32).normalize()
+        };
+        series[t] = Rot6d::from_quat(quat);
+        replaced += 1;
+    }
+    replaced
 }
 
 /// Unit quaternion of an orthonormal matrix, with `w ≥ 0` (a canonical sign).
@@ -125,6 +181,47 @@ mod tests {
     use super::*;
     #[cfg(target_arch = "wasm32")]
     use wasm_bindgen_test::wasm_bindgen_test as test;
+
+    /// A turn of `degrees` about the vertical axis.
+    fn yaw(degrees: f32) -> Rot6d {
+        Rot6d::from_quat(Quat::from_rotation_y(degrees.to_radians()))
+    }
+
+    #[test]
+    fn collapsed_rotations_follow_the_short_arc_between_strong_neighbours() {
+        // A fast 120° turn: frames 4..=6 collapse towards the origin with their first column
+        // swinging the wrong way round, as a hesitating network's output does.
+        let mut series: Vec<Rot6d> = (0..12).map(|t| yaw(t as f32 * 10.0)).collect();
+        for (t, wrong) in [(4, -60.0f32), (5, 160.0), (6, 100.0)] {
+            let (a1, a2) = yaw(wrong).columns();
+            let a1 = a1 * 0.1;
+            series[t] = Rot6d([a1.x, a1.y, a1.z, a2.x, a2.y, a2.z]);
+        }
+        assert!(series[5].column_strength() < 0.2 && series[3].column_strength() > 0.99);
+        assert_eq!(interpolate_collapsed_6d(&mut series, COLLAPSED_6D_STRENGTH), 3);
+        for t in 0..12 {
+            let angle = angle_between(series[t].to_quat(), yaw(t as f32 * 10.0).to_quat()).to_degrees();
+            assert!(angle < 1e-3 + 0.05, "frame {t} is {angle}° off the turn");
+        }
+    }
+
+    #[test]
+    fn strong_series_are_left_alone_and_collapsed_ends_take_their_neighbour() {
+        let strong: Vec<Rot6d> = (0..5).map(|t| yaw(t as f32 * 30.0)).collect();
+        let mut series = strong.clone();
+        assert_eq!(interpolate_collapsed_6d(&mut series, COLLAPSED_6D_STRENGTH), 0);
+        assert_eq!(series, strong);
+
+        series[0] = Rot6d([0.0; 6]);
+        series[4] = Rot6d([f32::NAN, 0.0, 0.0, 0.0, 1.0, 0.0]);
+        assert_eq!(interpolate_collapsed_6d(&mut series, COLLAPSED_6D_STRENGTH), 2);
+        assert!(angle_between(series[0].to_quat(), strong[1].to_quat()) < 1e-4);
+        assert!(angle_between(series[4].to_quat(), strong[3].to_quat()) < 1e-4);
+
+        let mut all_collapsed = vec![Rot6d([0.01, 0.0, 0.0, 0.0, 0.01, 0.0]); 3];
+        assert_eq!(interpolate_collapsed_6d(&mut all_collapsed, COLLAPSED_6D_STRENGTH), 0);
+        assert_eq!(all_collapsed[0].0[0], 0.01);
+    }
 
     #[test]
     fn identity_round_trips() {

@@ -1,5 +1,7 @@
-//! Decoding window outputs into the motion: overlapping windows are cross-faded in 6D, root
-//! orientations rotated from each window's frame into the world, and each frame's root
+//! Decoding window outputs into the motion: a window's collapsed root outputs (a 6D column
+//! near the origin, where the network hesitates in a fast turn) interpolated between their
+//! confident neighbours ([`interpolate_collapsed_6d`]), overlapping windows cross-faded in 6D,
+//! root orientations rotated from each window's frame into the world, and each frame's root
 //! translation recovered from the head by forward kinematics (`p_root = p_head − FK_head(θ)`).
 //!
 //! [`MotionAssembler`] takes windows in timeline order and gives frames out as soon as no
@@ -14,7 +16,7 @@ use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
 use egoexo_core::foot_contact::lift_feet_above_floor;
 use egoexo_core::glam::Mat3;
 use egoexo_core::motion::SmplMotion;
-use egoexo_core::rotation::Rot6d;
+use egoexo_core::rotation::{COLLAPSED_6D_STRENGTH, Rot6d, interpolate_collapsed_6d};
 use egoexo_core::skeleton::SmplPose;
 
 use crate::InferError;
@@ -100,7 +102,13 @@ impl MotionAssembler {
             self.pending.push_back(Accumulator::new(self.observers));
         }
         let r_world_window = Mat3::from_quat(window.r_world_window);
-        for t in 0..plan.len() {
+        // The window's root orientations (window frame), collapsed outputs interpolated
+        // between their confident neighbours before anything is blended.
+        let mut roots: Vec<Rot6d> = (0..plan.len())
+            .map(|t| Rot6d(window.poses[t * POSE_DIM..t * POSE_DIM + 6].try_into().unwrap_or(IDENTITY_6D)))
+            .collect();
+        interpolate_collapsed_6d(&mut roots, COLLAPSED_6D_STRENGTH);
+        for (t, root) in roots.iter().enumerate() {
             let w = crossfade_weight(
                 t,
                 plan.len(),
@@ -111,8 +119,7 @@ impl MotionAssembler {
             let row = &window.poses[t * POSE_DIM..(t + 1) * POSE_DIM];
             let a = &mut self.pending[plan.frames.start + t - self.first];
             // Root orientation: rotate the window-frame 6D columns into the world first.
-            let root = Rot6d(row[0..6].try_into().unwrap_or(IDENTITY_6D)).to_mat3();
-            let root_world = Rot6d::from_mat3(r_world_window * root).0;
+            let root_world = Rot6d::from_mat3(r_world_window * root.to_mat3()).0;
             for (c, v) in root_world.iter().enumerate() {
                 a.pose[c] += w * v;
             }

@@ -114,3 +114,38 @@ fn windows_one_at_a_time_give_the_batch_reconstruction_frame_by_frame() {
     let streamed = assemble_reconstruction(Method::EgoExo, tracking, &aligned, frames, aligned.floor_y).unwrap();
     assert_eq!(streamed, batch);
 }
+
+#[test]
+fn a_root_output_collapsing_mid_turn_decodes_on_the_turn() {
+    use egoexo_core::glam::Quat;
+    use egoexo_core::rotation::{Rot6d, angle_between};
+    use egoexo_infer::inputs::POSE_DIM;
+    use egoexo_infer::passes::WindowOutput;
+
+    let aligned = aligned_session(4.0, 1, TrackingMode::OnePoint, 5);
+    let options = ReconstructOptions { stride: egoexo_infer::windows::WINDOW, ..ReconstructOptions::default() };
+    let plan = ReconstructionPlan::new(&aligned, TrackingMode::OnePoint, &options.windows(), 1).unwrap();
+    let window = &plan.windows[0];
+    let ego = ego_pass(&aligned, window, TrackingMode::OnePoint, CoarsePoseSource::RestPose).unwrap();
+    let mut output = WindowOutput::from_coarse(&ego);
+    output.r_world_window = Quat::IDENTITY;
+    // The wearer turns 6° a frame; over frames 40..=43 the network hesitates: its first
+    // column shrinks to a tenth, pointing the wrong way round.
+    let turn = |t: usize| Quat::from_rotation_y((6.0 * t as f32).to_radians());
+    for t in 0..window.len() {
+        let mut root = Rot6d::from_quat(turn(t)).0;
+        if (40..=43).contains(&t) {
+            let wrong = Rot6d::from_quat(Quat::from_rotation_y((6.0 * t as f32 + 180.0).to_radians())).0;
+            root[0..3].iter_mut().zip(&wrong[0..3]).for_each(|(r, w)| *r = 0.1 * w);
+        }
+        output.poses[t * POSE_DIM..t * POSE_DIM + 6].copy_from_slice(&root);
+    }
+    let mut assembler = MotionAssembler::new(aligned.observers.len(), plan.crossfade_ramp);
+    assembler.add(&output).unwrap();
+    let frames = assembler.take_frames(&aligned, window.frames.end);
+    for t in 36..48 {
+        let root = frames[window.frames.start + t].pose.unwrap().root_orientation;
+        let off = angle_between(root, turn(t)).to_degrees();
+        assert!(off < 0.1, "frame {t}: {off:.2}° off the wearer's turn");
+    }
+}

@@ -15,7 +15,6 @@
 use std::ops::Range;
 
 use egoexo_core::aligned::Timeline;
-use egoexo_core::ego_features::TrackingMode;
 use egoexo_infer::windows::WINDOW;
 use egoexo_infer::{Engine, InferError, Method, ReconstructOptions};
 use egoexo_protocol::live::{DataFrame, RelayMessage};
@@ -176,12 +175,11 @@ impl LiveReconstructor {
         // which was trained without observers.
         let has_exo = aligned.observers.iter().any(|o| o.keypoints[index].iter().any(Option::is_some));
         let method = if has_exo { Method::EgoExo } else { Method::EgoOnly };
-        // 3-point whenever a wrist device is connected: the network reads, frame by frame,
+        // Tracking as for a recording (`tracking: None`, `AlignedSession::tracking_mode`):
+        // 3-point whenever a wrist device is connected; the network reads, frame by frame,
         // which wrists are tracked (ego feature layout v2), so a wrist arriving a sample after
         // the head or dropping out for a moment is simply untracked on those frames.
-        let tracking = if aligned.has_wrists() { TrackingMode::ThreePoint } else { TrackingMode::OnePoint };
-        let options =
-            ReconstructOptions { method, tracking: Some(tracking), stride: WINDOW, ..ReconstructOptions::default() };
+        let options = ReconstructOptions { method, tracking: None, stride: WINDOW, ..ReconstructOptions::default() };
         let recon = engine.reconstruct(&aligned, &options, &mut |_| true)?;
         // The scene of the one frame shown (its rays only), on the window's floor (the lowest
         // foot over the window: steady while the feet lift).

@@ -16,7 +16,7 @@ await initViewer();
 const worker = new Worker(new URL('worker.js', import.meta.url), { type: 'module' });
 const client = new WorkerClient(worker);
 // The answer to the one request in flight: its result, or its error.
-const ANSWERS = new Set(['imported', 'reconstructed', 'error', 'panic']);
+const ANSWERS = new Set(['imported', 'reconstructed', 'exported', 'error', 'panic']);
 let pending = null;
 worker.onmessage = ({ data }) => {
   const event = client.receive(data);
@@ -56,11 +56,26 @@ async function main() {
   say(`warm-up: ${(await time(false)).toFixed(0)} ms`);
   const egoExo = [];
   const appJob = [];
+  // Per run, the worker's time per stage (its summary's `timings`, taken with the clock the
+  // glue passes in) of a fresh open (import, align) and the whole job, plus an npz export
+  // timed here from request to file.
+  const stageRuns = [];
   for (let i = 0; i < runs; i += 1) {
     egoExo.push(await time(false));
-    appJob.push(await time(true));
+    await request((c) => c.open_archive(sample.file, bytes));
+    const started = performance.now();
+    const { summary: job } = await request((c) => c.reconstruct(true));
+    appJob.push(performance.now() - started);
+    const exportStarted = performance.now();
+    await request((c) => c.export('npz'));
+    const stages = Object.fromEntries((job.timings ?? []).map((t) => [t.stage, t.ms]));
+    stages.export = performance.now() - exportStarted;
+    stageRuns.push(stages);
     say(`run ${i + 1}/${runs}: ego-exo ${egoExo[i].toFixed(0)} ms, whole job ${appJob[i].toFixed(0)} ms`);
   }
+  const stageNames = [...new Set(stageRuns.flatMap((r) => Object.keys(r)))];
+  const stages = stageNames.map((stage) => ({ stage, ms: median(stageRuns.map((r) => r[stage] ?? 0)) }));
+  for (const { stage, ms } of stages) say(`  ${stage.padEnd(14)} ${ms.toFixed(2).padStart(9)} ms`);
   const result = {
     sample: sample.file,
     frames,
@@ -70,11 +85,36 @@ async function main() {
     median_app_ms: median(appJob),
     median_app_fps: frames / (median(appJob) / 1000),
     cores: navigator.hardwareConcurrency,
+    stages,
   };
   say(`median ego-exo: ${result.median_fps.toFixed(0)} frames/s (${result.median_ms.toFixed(0)} ms)`);
   say(`median whole job: ${result.median_app_fps.toFixed(0)} frames/s (${result.median_app_ms.toFixed(0)} ms)`);
+  result.networks = await compareNetworks(summary.tracking_points, Math.max(10, 4 * runs));
   document.body.dataset.result = JSON.stringify(result);
   document.body.dataset.state = 'done';
+}
+
+// The engines side by side on the same networks and inputs, in a worker of their own
+// (web/bench-networks.js).
+async function compareNetworks(points, networkRuns) {
+  say(`networks (${points}-point), ${networkRuns} alternating runs each:`);
+  const bench = new Worker(new URL('bench-networks.js', import.meta.url), { type: 'module' });
+  const answer = await new Promise((resolve, reject) => {
+    bench.onmessage = ({ data }) => resolve(data);
+    bench.onerror = (e) => reject(new Error(e.message || 'the network bench worker failed'));
+    bench.postMessage({ points, runs: networkRuns });
+  });
+  bench.terminate();
+  if (!answer.ok) throw new Error(`network bench: ${answer.error}`);
+  const { result } = answer;
+  if (result.ort_missing) say(`  onnxruntime-web not available (${result.ort_missing}): tract alone`);
+  const f = (v, d = 2) => (v == null ? '-' : v.toFixed(d));
+  for (const n of result.networks) {
+    say(`  ${n.network.padEnd(7)} tract ${f(n.tract_ms, 3)} ms, onnxruntime-web ${f(n.ort_ms, 3)} ms, ratio ${f(n.ratio)}, `
+      + `max |diff| ${n.max_abs_diff == null ? '-' : n.max_abs_diff.toExponential(1)}, load ${f(n.tract_load_ms, 0)} / ${f(n.ort_load_ms, 0)} ms, `
+      + `${f(n.flops / 1e6)} MFLOP, ${f(n.tract_gflops)} of ${f(n.attainable_gflops)} GFLOP/s attainable (${n.probe})`);
+  }
+  return result;
 }
 
 main().catch((error) => {

@@ -97,6 +97,11 @@ pub struct BenchResult {
     pub median_fps: f64,
     /// The whole job the app runs (ego-exo + ego-only overlay + scene), median frames/s.
     pub median_app_fps: f64,
+    /// Median milliseconds per stage of a fresh open + the whole job + an npz export, as
+    /// the worker times them (`import`, `align`, `ego-features`, …, `scene`, `export`).
+    pub stages: Vec<(String, f64)>,
+    /// The page's engine comparison (`web/bench-networks.js`), when it ran.
+    pub networks: Option<serde_json::Value>,
 }
 
 /// Serves `dist/` and runs `web/bench.html` `runs` times through `tests/e2e/bench.mjs`.
@@ -122,7 +127,33 @@ fn parse_bench_line(out: &str, prefix: &str) -> Result<BenchResult> {
         runs: number("runs")? as u64,
         median_fps: number("median_fps")?,
         median_app_fps: number("median_app_fps")?,
+        stages: v["stages"]
+            .as_array()
+            .map(|stages| {
+                stages.iter().filter_map(|s| Some((s["stage"].as_str()?.to_string(), s["ms"].as_f64()?))).collect()
+            })
+            .unwrap_or_default(),
+        networks: v.get("networks").cloned(),
     })
+}
+
+/// The native network bench (`crates/egoexo-infer/examples/bench_networks.rs`, release):
+/// FLOPs, ms and attainable GFLOP/s per network of `points`-point tracking. Returns its
+/// `BENCH_NETWORKS` JSON.
+pub fn run_native_networks(models: &Path, points: u8, runs: u32) -> Result<serde_json::Value> {
+    let out = cmd::output_checked(
+        Command::new("cargo")
+            .args(["run", "--quiet", "--release", "-p", "egoexo-infer", "--example", "bench_networks", "--"])
+            .arg(models)
+            .arg(points.to_string())
+            .arg(runs.to_string()),
+    )?;
+    let line = out
+        .lines()
+        .rev()
+        .find_map(|l| l.strip_prefix("BENCH_NETWORKS "))
+        .context("the network bench printed no BENCH_NETWORKS line")?;
+    serde_json::from_str(line).with_context(|| format!("BENCH_NETWORKS `{line}`"))
 }
 
 /// Serves `dist/` and runs the live bench (`tests/e2e/live-bench.mjs`): the page in Live

@@ -137,8 +137,105 @@ fn main() -> Result<()> {
                     w / n
                 );
             }
+            print_stage_table(&web.stages, &native.stages);
+            let points = web.networks.as_ref().and_then(|n| n["points"].as_u64()).unwrap_or(3) as u8;
+            let native_networks = e2e::run_native_networks(&models, points, 30)?;
+            print_network_table(web.networks.as_ref(), &native_networks);
             Ok(())
         }
+    }
+}
+
+/// The per-stage table of the whole job: median ms in the browser's worker and natively.
+fn print_stage_table(web: &[(String, f64)], native: &[(String, f64)]) {
+    const ORDER: [&str; 10] =
+        ["import", "align", "ego-features", "egonet", "exo-features", "gate", "fusion", "decode", "scene", "export"];
+    let mut names: Vec<&str> =
+        ORDER.iter().copied().filter(|n| web.iter().chain(native).any(|(s, _)| s == n)).collect();
+    names.extend(web.iter().chain(native).map(|(s, _)| s.as_str()).filter(|s| !ORDER.contains(s)));
+    names.dedup();
+    if names.is_empty() {
+        return;
+    }
+    let get = |list: &[(String, f64)], name: &str| list.iter().find(|(s, _)| s == name).map(|(_, ms)| *ms);
+    let total = |list: &[(String, f64)]| list.iter().map(|(_, ms)| ms).sum::<f64>();
+    println!("per stage (median ms: fresh open, whole job, npz export):");
+    println!("  {:<14} {:>10} {:>10} {:>8} {:>7}", "stage", "browser", "native", "ratio", "share");
+    let web_total = total(web);
+    for name in names {
+        let (w, n) = (get(web, name), get(native, name));
+        let cell = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
+        let ratio = match (w, n) {
+            (Some(w), Some(n)) if n > 0.0 => format!("{:.2}", w / n),
+            _ => "-".into(),
+        };
+        let share = w.map_or("-".into(), |w| format!("{:.1}%", 100.0 * w / web_total.max(f64::MIN_POSITIVE)));
+        println!("  {name:<14} {:>10} {:>10} {ratio:>8} {share:>7}", cell(w), cell(n));
+    }
+    println!("  {:<14} {:>10.2} {:>10.2}", "total", web_total, total(native));
+}
+
+/// The engines side by side per network: tract in the browser against onnxruntime-web (same
+/// worker, inputs, one thread), and achieved against attainable GFLOP/s, browser and native.
+pub(crate) fn print_network_table(web: Option<&serde_json::Value>, native: &serde_json::Value) {
+    let num = |v: &serde_json::Value, k: &str| v[k].as_f64();
+    let cell = |v: Option<f64>, d: usize| v.map_or("-".to_string(), |v| format!("{v:.d$}"));
+    println!(
+        "networks per 96-frame window (median ms; GFLOP/s achieved / attainable by a plain product of the dominant shape):"
+    );
+    println!(
+        "  {:<7} {:>8} {:>9} {:>7} {:>9} {:>13} {:>13} {:>8} {:>8} {:>15}",
+        "network",
+        "MFLOP",
+        "tract-web",
+        "ort-web",
+        "tract/ort",
+        "max |diff|",
+        "load tract/ort",
+        "native",
+        "ort GF/s",
+        "GF/s web|native"
+    );
+    let empty = Vec::new();
+    let web_rows = web.and_then(|w| w["networks"].as_array()).unwrap_or(&empty);
+    let native_rows = native["networks"].as_array().unwrap_or(&empty);
+    let null = serde_json::Value::Null;
+    for name in ["egonet", "gate", "fusion"] {
+        let w = web_rows.iter().find(|r| r["network"].as_str() == Some(name));
+        let n = native_rows.iter().find(|r| r["network"].as_str() == Some(name)).unwrap_or(&null);
+        if w.is_none() && n.is_null() {
+            continue;
+        }
+        let get = |k: &str| w.and_then(|w| num(w, k));
+        let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
+            (Some(a), Some(b)) if b > 0.0 => Some(100.0 * a / b),
+            _ => None,
+        };
+        let web_share = ratio(get("tract_gflops"), get("attainable_gflops"));
+        let native_share = ratio(num(n, "gflops"), num(n, "attainable_gflops"));
+        println!(
+            "  {name:<7} {:>8} {:>9} {:>7} {:>9} {:>13} {:>13} {:>8} {:>8} {:>15}",
+            cell(num(n, "flops").map(|f| f / 1e6), 2),
+            cell(get("tract_ms"), 3),
+            cell(get("ort_ms"), 3),
+            cell(get("ratio"), 2),
+            get("max_abs_diff").map_or("-".into(), |d| format!("{d:.1e}")),
+            format!("{}/{}", cell(get("tract_load_ms"), 0), cell(get("ort_load_ms"), 0)),
+            cell(num(n, "ms"), 3),
+            cell(get("ort_gflops"), 1),
+            format!(
+                "{}/{} {}%|{}/{} {}%",
+                cell(get("tract_gflops"), 1),
+                cell(get("attainable_gflops"), 1),
+                cell(web_share, 0),
+                cell(num(n, "gflops"), 1),
+                cell(num(n, "attainable_gflops"), 1),
+                cell(native_share, 0)
+            ),
+        );
+    }
+    if let Some(missing) = web.and_then(|w| w["ort_missing"].as_str()) {
+        println!("  (onnxruntime-web was not available in the page: {missing})");
     }
 }
 

@@ -189,6 +189,9 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
             "bench page ({} frames, median of {}): {:.0} frames/s ego-exo, {:.0} frames/s whole app job",
             b.frames, b.runs, b.median_fps, b.median_app_fps
         );
+        if b.networks.is_some() {
+            crate::print_network_table(b.networks.as_ref(), &serde_json::Value::Null);
+        }
         println!(
             "live in the browser (glass-to-skeleton latency; the part up to the worker's post; worker ms per frame):"
         );

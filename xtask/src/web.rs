@@ -91,6 +91,17 @@ pub fn build_dist(root: &Path, models: &Path, wasm_opt: WasmOpt) -> Result<Vec<M
         });
     }
     assemble(root, models, &pkg)?;
+    // The models the page downloads (every file the manifest lists), for the same table.
+    let manifest = std::fs::read(models.join("manifest.json"))?;
+    for file in model_files(&manifest)? {
+        let bytes = std::fs::read(models.join(&file)).with_context(|| format!("reading models/{file}"))?;
+        sizes.push(ModuleSize {
+            file: format!("models/{file}"),
+            raw: bytes.len() as u64,
+            gzipped: gzipped_len(&bytes)?,
+            optimised: false,
+        });
+    }
     Ok(sizes)
 }
 
@@ -197,6 +208,17 @@ fn assemble(root: &Path, models: &Path, pkg: &Path) -> Result<()> {
             std::fs::copy(&path, out.join(path.file_name().context("file name")?))?;
         }
     }
+    // onnxruntime-web's wasm backend for the bench page's engine comparison
+    // (`web/bench-networks.js`); the app never loads it. From tests/node_modules when installed.
+    let ort = root.join("tests").join("node_modules").join("onnxruntime-web").join("dist");
+    if ort.is_dir() {
+        let vendor = staging.join("vendor").join("onnxruntime-web");
+        std::fs::create_dir_all(&vendor)?;
+        for file in ORT_FILES {
+            std::fs::copy(ort.join(file), vendor.join(file))
+                .with_context(|| format!("copying {file} from {}", ort.display()))?;
+        }
+    }
     let build = tree_hash(&staging)?;
     let assets = dist.join("v").join(&build);
     std::fs::rename(&staging, &assets)?;
@@ -213,6 +235,9 @@ fn assemble(root: &Path, models: &Path, pkg: &Path) -> Result<()> {
     eprintln!("dist/ assembled, assets under dist/v/{build}/");
     Ok(())
 }
+
+/// The files of npm `onnxruntime-web` its wasm-only entry point loads (one-thread SIMD).
+const ORT_FILES: [&str; 3] = ["ort.wasm.min.mjs", "ort-wasm-simd-threaded.mjs", "ort-wasm-simd-threaded.wasm"];
 
 /// A hash of every file under `dir` (relative paths and contents), as 16 hex digits.
 fn tree_hash(dir: &Path) -> Result<String> {
@@ -291,8 +316,10 @@ fn copy_tree_except(from: &Path, to: &Path, except: &[&str]) -> Result<()> {
     Ok(())
 }
 
-/// Prints the module sizes.
+/// Prints the module and model sizes, and the models' total.
 pub fn print_sizes(sizes: &[ModuleSize]) {
+    let models = sizes.iter().filter(|s| s.file.starts_with("models/"));
+    let (raw, gzipped) = models.fold((0, 0), |(r, g), s| (r + s.raw, g + s.gzipped));
     for s in sizes {
         println!(
             "{:<34} {:>6.2} MB raw, {:>5.2} MB gzipped{}",
@@ -301,6 +328,9 @@ pub fn print_sizes(sizes: &[ModuleSize]) {
             s.gzipped as f64 / 1e6,
             if s.optimised { " (wasm-opt)" } else { "" }
         );
+    }
+    if raw > 0 {
+        println!("{:<34} {:>6.2} MB raw, {:>5.2} MB gzipped", "models (total)", raw as f64 / 1e6, gzipped as f64 / 1e6);
     }
 }
 

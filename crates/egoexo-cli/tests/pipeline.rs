@@ -76,6 +76,23 @@ fn simulate_inspect_reconstruct_and_evaluate() {
     ]);
     assert!(ego_only.contains("ego-only, 1-point"), "{ego_only}");
 
+    // Windows spread over threads write the same file as one after another; `--timings`
+    // prints the stage table and the scaling over threads.
+    let one = dir.join("one-thread.npz");
+    let two = dir.join("two-threads.npz");
+    let models = fixture_models();
+    ok(&["reconstruct", &s(&files[0]), "-o", &s(&one), "--models", &models, "--threads", "1"]);
+    ok(&["reconstruct", &s(&files[0]), "-o", &s(&two), "--models", &models, "--threads", "2"]);
+    assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&two).unwrap());
+    let timed = dir.join("timed.npz");
+    let report =
+        ok(&["reconstruct", &s(&files[0]), "-o", &s(&timed), "--models", &models, "--threads", "2", "--timings", "2"]);
+    for stage in ["import", "align", "ego-features", "egonet", "exo-features", "gate", "fusion", "decode", "export"] {
+        assert!(report.lines().any(|l| l.starts_with(stage)), "no {stage} row: {report}");
+    }
+    assert!(report.contains("frames/s for the whole job") && report.contains("2 threads:"), "{report}");
+    assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&timed).unwrap());
+
     // Training shards.
     let shards = dir.join("shards");
     let out = ok(&[

@@ -307,15 +307,8 @@ impl Engine {
         methods: &[Method],
         progress: &mut dyn FnMut(Progress) -> bool,
     ) -> Result<Vec<Reconstruction>, InferError> {
-        let mut groups: Vec<(CoarsePose, Vec<usize>)> = Vec::new();
-        for (i, method) in methods.iter().enumerate() {
-            match groups.iter_mut().find(|(coarse, _)| *coarse == method.coarse_pose()) {
-                Some((_, members)) => members.push(i),
-                None => groups.push((method.coarse_pose(), vec![i])),
-            }
-        }
         let mut results: Vec<Option<Reconstruction>> = vec![None; methods.len()];
-        for (_, members) in groups {
+        for members in coarse_pose_groups(methods) {
             let group: Vec<Method> = members.iter().map(|&i| methods[i]).collect();
             let mut job = self.start(aligned, options, &group)?;
             while let Some(p) = job.step(self, aligned)? {
@@ -329,4 +322,39 @@ impl Engine {
         }
         results.into_iter().map(|r| r.ok_or(InferError::Methods("no method to run".into()))).collect()
     }
+
+    /// [`Engine::reconstruct_each`] with each job's windows spread over the current rayon
+    /// pool ([`ReconstructionJob::run_in_parallel`]); the same results.
+    #[cfg(feature = "parallel")]
+    pub fn reconstruct_each_in_parallel(
+        &self,
+        aligned: &AlignedSession,
+        options: &ReconstructOptions,
+        methods: &[Method],
+        progress: &mut dyn FnMut(Progress) -> bool,
+    ) -> Result<Vec<Reconstruction>, InferError> {
+        let mut results: Vec<Option<Reconstruction>> = vec![None; methods.len()];
+        for members in coarse_pose_groups(methods) {
+            let group: Vec<Method> = members.iter().map(|&i| methods[i]).collect();
+            let mut job = self.start(aligned, options, &group)?;
+            job.run_in_parallel(self, aligned, crate::job::PARALLEL_CHUNK, progress)?;
+            for (i, r) in members.into_iter().zip(job.finish(aligned)?) {
+                results[i] = Some(r);
+            }
+        }
+        results.into_iter().map(|r| r.ok_or(InferError::Methods("no method to run".into()))).collect()
+    }
+}
+
+/// Indices of `methods` grouped by coarse-pose source (one job each), groups in the order of
+/// their first method.
+fn coarse_pose_groups(methods: &[Method]) -> Vec<Vec<usize>> {
+    let mut groups: Vec<(CoarsePose, Vec<usize>)> = Vec::new();
+    for (i, method) in methods.iter().enumerate() {
+        match groups.iter_mut().find(|(coarse, _)| *coarse == method.coarse_pose()) {
+            Some((_, members)) => members.push(i),
+            None => groups.push((method.coarse_pose(), vec![i])),
+        }
+    }
+    groups.into_iter().map(|(_, members)| members).collect()
 }

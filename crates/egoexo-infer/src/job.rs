@@ -18,6 +18,13 @@ use crate::decode::{MotionAssembler, assemble_reconstruction};
 use crate::engine::{CoarsePose, Engine, Method, Progress, ReconstructOptions, Reconstruction, Stage};
 use crate::passes::{EgoPassOutput, WindowOutput, ego_pass, exo_pass, fusion_pass};
 use crate::plan::{ReconstructionPlan, resolve_tracking};
+use crate::timing::{Clock, StageTimer, StageTimings, TimedStage};
+
+/// Windows per chunk of [`ReconstructionJob::run_in_parallel`]: enough to keep a few cores
+/// busy, few enough that a chunk's outputs stay small (an hour-long session has ~2,300
+/// windows).
+#[cfg(feature = "parallel")]
+pub const PARALLEL_CHUNK: usize = 64;
 
 /// One reconstruction of one session with one or more methods (see the module docs).
 #[derive(Clone, Debug)]
@@ -35,6 +42,8 @@ pub struct ReconstructionJob {
     window: usize,
     /// The floor the feet are kept above, when the options ask and the session knows it.
     floor_y: Option<f32>,
+    /// Time per stage of the steps run with a clock ([`Self::step_timed`]).
+    timings: StageTimings,
 }
 
 impl ReconstructionJob {
@@ -71,6 +80,7 @@ impl ReconstructionJob {
             pass: 0,
             window: 0,
             floor_y: aligned.floor_y.filter(|y| options.floor_contact && y.is_finite()),
+            timings: StageTimings::default(),
         })
     }
 
@@ -97,6 +107,34 @@ impl ReconstructionJob {
     /// Runs the next window of the current pass; `None` when every pass is done. `engine` and
     /// `aligned` must be the ones the job was started with.
     pub fn step(&mut self, engine: &Engine, aligned: &AlignedSession) -> Result<Option<Progress>, InferError> {
+        self.step_with(engine, aligned, &mut StageTimer::off())
+    }
+
+    /// [`Self::step`], timing its stages with `clock` into [`Self::timings`].
+    pub fn step_timed(
+        &mut self,
+        engine: &Engine,
+        aligned: &AlignedSession,
+        clock: &mut dyn Clock,
+    ) -> Result<Option<Progress>, InferError> {
+        let mut timer = StageTimer::new(clock);
+        let step = self.step_with(engine, aligned, &mut timer);
+        self.timings.merge(&timer.timings);
+        step
+    }
+
+    /// The time per engine stage of the steps run with [`Self::step_timed`] (and the decode
+    /// of [`Self::finish_timed`]).
+    pub fn timings(&self) -> &StageTimings {
+        &self.timings
+    }
+
+    fn step_with(
+        &mut self,
+        engine: &Engine,
+        aligned: &AlignedSession,
+        timer: &mut StageTimer<'_>,
+    ) -> Result<Option<Progress>, InferError> {
         let windows = self.plan.windows.len();
         if self.window == windows && self.pass <= self.methods.len() {
             self.pass += 1;
@@ -110,7 +148,7 @@ impl ReconstructionJob {
         let tracking = self.plan.tracking;
         let stage = if self.pass == 0 {
             let source = engine.coarse_pose_source(self.coarse, tracking)?;
-            self.ego.push(ego_pass(aligned, &self.plan.windows[i], tracking, source)?);
+            self.ego.push(ego_pass(aligned, &self.plan.windows[i], tracking, source, timer)?);
             Stage::Ego
         } else {
             let method = self.methods[self.pass - 1];
@@ -119,11 +157,12 @@ impl ReconstructionJob {
                 None => WindowOutput::from_coarse(ego),
                 Some(mode) => {
                     let models = engine.require_models(tracking)?;
-                    let exo = exo_pass(aligned, models, ego, &self.plan.observers, mode)?;
-                    fusion_pass(models, ego, &exo)?
+                    let exo = exo_pass(aligned, models, ego, &self.plan.observers, mode, timer)?;
+                    fusion_pass(models, ego, &exo, timer)?
                 }
             };
-            self.assemblers[self.pass - 1].add(&output)?;
+            let assembler = &mut self.assemblers[self.pass - 1];
+            timer.time(TimedStage::Decode, || assembler.add(&output))?;
             if self.pass == self.methods.len() && i + 1 == windows {
                 // The last pass is done with the ego outputs.
                 self.ego = Vec::new();
@@ -134,6 +173,66 @@ impl ReconstructionJob {
         Ok(Some(Progress { stage, done: self.window, total: windows }))
     }
 
+    /// Runs every step of a job that has not started, its windows spread over the current
+    /// rayon pool: chunks of `chunk` windows ([`PARALLEL_CHUNK`] in the engine), each chunk's
+    /// ego passes in parallel,
+    /// then each method's exo and fusion passes in parallel, decoded in window order — the same
+    /// functions and order of decoding as [`Self::step`], so the same result; at most a
+    /// chunk's window outputs are held at once. `progress` is called after every chunk;
+    /// returning `false` cancels.
+    #[cfg(feature = "parallel")]
+    pub fn run_in_parallel(
+        &mut self,
+        engine: &Engine,
+        aligned: &AlignedSession,
+        chunk: usize,
+        progress: &mut dyn FnMut(Progress) -> bool,
+    ) -> Result<(), InferError> {
+        use rayon::prelude::*;
+
+        if self.done_steps() != 0 {
+            return Err(InferError::Window("a job runs in parallel only from its start".into()));
+        }
+        self.plan.check_session(aligned)?;
+        let tracking = self.plan.tracking;
+        let source = engine.coarse_pose_source(self.coarse, tracking)?;
+        let windows = self.plan.windows.len();
+        let mut done = 0;
+        for chunk in self.plan.windows.chunks(chunk.max(1)) {
+            let ego: Vec<EgoPassOutput> = chunk
+                .par_iter()
+                .map(|w| ego_pass(aligned, w, tracking, source, &mut StageTimer::off()))
+                .collect::<Result<_, _>>()?;
+            for (method, assembler) in self.methods.iter().zip(&mut self.assemblers) {
+                let outputs: Vec<WindowOutput> = ego
+                    .par_iter()
+                    .map(|ego| match method.exo_mode() {
+                        None => Ok(WindowOutput::from_coarse(ego)),
+                        Some(mode) => {
+                            let models = engine.require_models(tracking)?;
+                            let exo =
+                                exo_pass(aligned, models, ego, &self.plan.observers, mode, &mut StageTimer::off())?;
+                            fusion_pass(models, ego, &exo, &mut StageTimer::off())
+                        }
+                    })
+                    .collect::<Result<_, _>>()?;
+                for output in &outputs {
+                    assembler.add(output)?;
+                }
+            }
+            done += chunk.len();
+            let stage = self.methods.last().map_or(Stage::Ego, |&m| Stage::Fusion(m));
+            if !progress(Progress { stage, done, total: windows }) {
+                return Err(InferError::Cancelled);
+            }
+        }
+        // Every pass has run: the state `step` leaves at the end.
+        self.pass = self.methods.len();
+        self.window = windows;
+        self.ego = Vec::new();
+        Ok(())
+    }
+
     /// Whether every step has run.
     pub fn is_done(&self) -> bool {
         self.done_steps() >= self.total_steps()
@@ -141,6 +240,31 @@ impl ReconstructionJob {
 
     /// The reconstructions, one per method in order. Fails unless every step has run.
     pub fn finish(self, aligned: &AlignedSession) -> Result<Vec<Reconstruction>, InferError> {
+        self.finish_with(aligned, &mut StageTimer::off())
+    }
+
+    /// [`Self::finish`], timing the final decode with `clock`; also returns every stage's
+    /// time over the job (the steps run with [`Self::step_timed`], and this decode).
+    pub fn finish_timed(
+        self,
+        aligned: &AlignedSession,
+        clock: &mut dyn Clock,
+    ) -> Result<(Vec<Reconstruction>, StageTimings), InferError> {
+        let mut timings = self.timings.clone();
+        let mut timer = StageTimer::new(clock);
+        let out = self.finish_with(aligned, &mut timer)?;
+        // The final decode counts as part of the decode stage, not as another call.
+        for s in &timer.timings.stages {
+            timings.add_time(s.stage, s.ms, 0);
+        }
+        Ok((out, timings))
+    }
+
+    fn finish_with(
+        self,
+        aligned: &AlignedSession,
+        timer: &mut StageTimer<'_>,
+    ) -> Result<Vec<Reconstruction>, InferError> {
         if !self.is_done() {
             return Err(InferError::Window(format!(
                 "the job is unfinished: {} of {} steps ran",
@@ -150,13 +274,16 @@ impl ReconstructionJob {
         }
         self.plan.check_session(aligned)?;
         let tracking = self.plan.tracking;
-        self.methods
-            .iter()
-            .zip(self.assemblers)
-            .map(|(&method, mut assembler)| {
-                let frames = assembler.take_frames(aligned, aligned.timeline.frames);
-                assemble_reconstruction(method, tracking, aligned, frames, self.floor_y)
-            })
-            .collect()
+        let floor_y = self.floor_y;
+        timer.time(TimedStage::Decode, || {
+            self.methods
+                .iter()
+                .zip(self.assemblers)
+                .map(|(&method, mut assembler)| {
+                    let frames = assembler.take_frames(aligned, aligned.timeline.frames);
+                    assemble_reconstruction(method, tracking, aligned, frames, floor_y)
+                })
+                .collect()
+        })
     }
 }

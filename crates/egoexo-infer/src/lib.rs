@@ -18,11 +18,14 @@
 //! - [`models`] — ONNX models loaded from bytes and run by tract, [`LoadedModels`] (the
 //!   offline networks and the live variants per lookahead); [`manifest`] — `models/manifest.json`.
 //! - [`baselines`] — rest pose and nearest neighbour.
+//! - [`timing`] — time per stage, with a clock the caller passes in; [`cost`] — FLOPs per
+//!   network run and a plain matrix-product probe of the same shapes.
 //!
 //! Nothing here does I/O (models arrive as bytes), spawns threads or reads the clock, so the
 //! same engine runs in the browser's Web Worker.
 
 pub mod baselines;
+pub mod cost;
 pub mod decode;
 pub mod engine;
 pub mod inputs;
@@ -31,11 +34,13 @@ pub mod manifest;
 pub mod models;
 pub mod passes;
 pub mod plan;
+pub mod timing;
 pub mod windows;
 
 pub use engine::{Engine, Method, ObserverGates, Progress, ReconstructOptions, Reconstruction, Stage};
 pub use job::ReconstructionJob;
 pub use models::{LoadedModels, NetworkRuns};
+pub use timing::{Clock, StageTimer, StageTimings, TimedStage};
 
 use thiserror::Error;
 

@@ -36,6 +36,13 @@ pub struct ModelFile {
     pub outputs: Vec<TensorSpec>,
 }
 
+impl ModelFile {
+    /// The inputs' shapes, in declaration order.
+    pub fn input_shapes(&self) -> Vec<Vec<usize>> {
+        self.inputs.iter().map(|i| i.shape.clone()).collect()
+    }
+}
+
 /// The fusion network's per-keypoint exo input ([`crate::inputs::fusion_exo_input`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ExoTokenLayout {

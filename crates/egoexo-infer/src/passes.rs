@@ -22,6 +22,7 @@ use crate::InferError;
 use crate::baselines::{NearestNeighbourIndex, rest_pose_window};
 use crate::inputs::{EgoWindow, ExoWindow, POSE_DIM, ego_window, exo_index, exo_window, fusion_exo_input, world_poses};
 use crate::models::{ModelSet, OnnxModel};
+use crate::timing::{StageTimer, TimedStage};
 use crate::windows::{WINDOW, WindowPlan};
 
 /// Where a window's coarse pose comes from.
@@ -50,12 +51,13 @@ pub fn ego_pass(
     plan: &WindowPlan,
     tracking: TrackingMode,
     source: CoarsePoseSource<'_>,
+    timer: &mut StageTimer<'_>,
 ) -> Result<EgoPassOutput, InferError> {
-    let window = ego_window(aligned, plan, tracking)?;
+    let window = timer.time(TimedStage::EgoFeatures, || ego_window(aligned, plan, tracking))?;
     let coarse = match source {
         CoarsePoseSource::RestPose => rest_pose_window(&window),
         CoarsePoseSource::NearestNeighbour(index) => index.window_poses(&window),
-        CoarsePoseSource::EgoNet(egonet) => coarse_pose_with(egonet, &window)?,
+        CoarsePoseSource::EgoNet(egonet) => timer.time(TimedStage::EgoNet, || coarse_pose_with(egonet, &window))?,
     };
     Ok(EgoPassOutput { window, coarse })
 }
@@ -128,17 +130,24 @@ pub fn exo_pass(
     ego: &EgoPassOutput,
     observers: &[usize],
     mode: ExoMode,
+    timer: &mut StageTimer<'_>,
 ) -> Result<ExoPassOutput, InferError> {
     let slots = models.manifest.max_observers;
     let slotted: &[usize] = if mode == ExoMode::Masked { &[] } else { observers };
-    let exo = if slotted.is_empty() {
-        exo_window(aligned, &ego.window, &[], &[], slots)
-    } else {
-        let coarse_world = world_poses(&ego.window, &ego.coarse, &aligned.skeleton, aligned.head_joint_in_device);
-        exo_window(aligned, &ego.window, &coarse_world, slotted, slots)
-    };
+    let exo = timer.time(TimedStage::ExoFeatures, || {
+        if slotted.is_empty() {
+            exo_window(aligned, &ego.window, &[], &[], slots)
+        } else {
+            let coarse_world = world_poses(&ego.window, &ego.coarse, &aligned.skeleton, aligned.head_joint_in_device);
+            exo_window(aligned, &ego.window, &coarse_world, slotted, slots)
+        }
+    });
     let gate: Vec<f32> = match mode {
-        ExoMode::Gated => models.gate.run(&[&exo.gate_features])?.into_iter().next().unwrap_or_default(),
+        ExoMode::Gated => timer
+            .time(TimedStage::Gate, || models.gate.run(&[&exo.gate_features]))?
+            .into_iter()
+            .next()
+            .unwrap_or_default(),
         ExoMode::Ungated | ExoMode::Masked => exo.ray_valid.clone(),
     };
     if gate.len() != exo.ray_valid.len() {
@@ -193,9 +202,16 @@ impl WindowOutput {
 
 /// Fusion pass: the spatial–temporal transformer over the ego stream, the coarse pose and
 /// the gated exo tokens of every slot.
-pub fn fusion_pass(models: &ModelSet, ego: &EgoPassOutput, exo: &ExoPassOutput) -> Result<WindowOutput, InferError> {
-    let exo_input = fusion_exo_input(&exo.exo, &exo.gate);
-    let out = models.fusion.run(&[&ego.window.ego, &ego.coarse, &exo_input, &exo.exo.observer_mask])?;
+pub fn fusion_pass(
+    models: &ModelSet,
+    ego: &EgoPassOutput,
+    exo: &ExoPassOutput,
+    timer: &mut StageTimer<'_>,
+) -> Result<WindowOutput, InferError> {
+    let out = timer.time(TimedStage::Fusion, || {
+        let exo_input = fusion_exo_input(&exo.exo, &exo.gate);
+        models.fusion.run(&[&ego.window.ego, &ego.coarse, &exo_input, &exo.exo.observer_mask])
+    })?;
     Ok(WindowOutput {
         plan: ego.window.plan.clone(),
         r_world_window: ego.window.t_world_window.rotation,

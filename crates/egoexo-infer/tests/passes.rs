@@ -10,7 +10,7 @@ use egoexo_core::TrackingMode;
 use egoexo_infer::decode::{MotionAssembler, assemble_reconstruction};
 use egoexo_infer::passes::{CoarsePoseSource, ExoMode, ego_pass, exo_pass, fusion_pass};
 use egoexo_infer::plan::{ReconstructionPlan, resolve_tracking};
-use egoexo_infer::{Engine, InferError, Method, NetworkRuns, ReconstructOptions, Stage};
+use egoexo_infer::{Engine, InferError, Method, NetworkRuns, ReconstructOptions, Stage, StageTimer, TimedStage};
 
 fn engine() -> Engine {
     Engine::new()
@@ -47,6 +47,70 @@ fn ego_exo_and_the_ego_only_overlay_share_one_ego_pass() {
     }
     let separately = engine.network_runs() - before - runs;
     assert_eq!(separately.egonet, 2 * windows as u64);
+}
+
+#[test]
+fn a_timed_job_times_every_engine_stage_per_window_and_gives_the_untimed_result() {
+    let aligned = aligned_session(9.0, 2, TrackingMode::ThreePoint, 11);
+    let engine = engine();
+    let options = ReconstructOptions::default();
+    let methods = [Method::EgoExo, Method::EgoOnly];
+    // A clock that advances 1 ms per reading: each timed stage call takes exactly 1 ms.
+    let mut now = 0.0;
+    let mut clock = move || {
+        now += 1.0;
+        now
+    };
+    let mut job = engine.start(&aligned, &options, &methods).unwrap();
+    let windows = job.plan().windows.len() as u32;
+    while job.step_timed(&engine, &aligned, &mut clock).unwrap().is_some() {}
+    let (timed, timings) = job.finish_timed(&aligned, &mut clock).unwrap();
+    let calls = |stage| timings.stages.iter().find(|s| s.stage == stage).map(|s| s.calls);
+    // Ego features and EgoNet once per window (shared); rays for both methods (masked for
+    // ego-only), the gate only for ego-exo; fusion and decode once per window and method.
+    assert_eq!(calls(TimedStage::EgoFeatures), Some(windows));
+    assert_eq!(calls(TimedStage::EgoNet), Some(windows));
+    assert_eq!(calls(TimedStage::ExoFeatures), Some(2 * windows));
+    assert_eq!(calls(TimedStage::Gate), Some(windows));
+    assert_eq!(calls(TimedStage::Fusion), Some(2 * windows));
+    assert_eq!(calls(TimedStage::Decode), Some(2 * windows));
+    assert_eq!(calls(TimedStage::Import), None);
+    assert_eq!(timings.ms(TimedStage::Fusion), f64::from(2 * windows));
+    assert_eq!(timings.ms(TimedStage::Decode), f64::from(2 * windows + 1), "the final decode adds time, not a call");
+    assert_eq!(timed, engine.reconstruct_each(&aligned, &options, &methods, &mut |_| true).unwrap());
+}
+
+#[cfg(feature = "parallel")]
+#[test]
+fn a_job_run_in_parallel_gives_the_sequential_result_chunk_by_chunk() {
+    let aligned = aligned_session(9.0, 2, TrackingMode::ThreePoint, 11);
+    let engine = engine();
+    let options = ReconstructOptions::default();
+    let methods = [Method::EgoExo, Method::EgoOnly];
+    let sequential = engine.reconstruct_each(&aligned, &options, &methods, &mut |_| true).unwrap();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap();
+    let mut job = engine.start(&aligned, &options, &methods).unwrap();
+    let windows = job.plan().windows.len();
+    assert!(windows >= 4, "{windows} windows");
+    let mut reports = Vec::new();
+    pool.install(|| {
+        job.run_in_parallel(&engine, &aligned, 3, &mut |p| {
+            reports.push(p.done);
+            true
+        })
+    })
+    .unwrap();
+    assert!(job.is_done());
+    assert_eq!(reports.last(), Some(&windows));
+    assert_eq!(reports.len(), windows.div_ceil(3));
+    assert_eq!(job.finish(&aligned).unwrap(), sequential);
+    // A job already stepped does not restart in parallel; a cancel stops it.
+    let mut job = engine.start(&aligned, &options, &methods).unwrap();
+    job.step(&engine, &aligned).unwrap();
+    assert!(job.run_in_parallel(&engine, &aligned, 3, &mut |_| true).is_err());
+    let mut job = engine.start(&aligned, &options, &methods).unwrap();
+    assert!(matches!(job.run_in_parallel(&engine, &aligned, 3, &mut |_| false), Err(InferError::Cancelled)));
+    assert_eq!(engine.reconstruct_each_in_parallel(&aligned, &options, &methods, &mut |_| true).unwrap(), sequential);
 }
 
 #[test]
@@ -98,9 +162,11 @@ fn windows_one_at_a_time_give_the_batch_reconstruction_frame_by_frame() {
     let mut frames = Vec::new();
     let mut released = Vec::new();
     for (i, window) in plan.windows.iter().enumerate() {
-        let ego = ego_pass(&aligned, window, tracking, CoarsePoseSource::EgoNet(&models.egonet)).unwrap();
-        let exo = exo_pass(&aligned, models, &ego, &plan.observers, ExoMode::Gated).unwrap();
-        assembler.add(&fusion_pass(models, &ego, &exo).unwrap()).unwrap();
+        let ego =
+            ego_pass(&aligned, window, tracking, CoarsePoseSource::EgoNet(&models.egonet), &mut StageTimer::off())
+                .unwrap();
+        let exo = exo_pass(&aligned, models, &ego, &plan.observers, ExoMode::Gated, &mut StageTimer::off()).unwrap();
+        assembler.add(&fusion_pass(models, &ego, &exo, &mut StageTimer::off()).unwrap()).unwrap();
         let final_before = plan.windows.get(i + 1).map_or(aligned.timeline.frames, |next| next.frames.start);
         let out = assembler.take_frames(&aligned, final_before);
         released.push(out.len());
@@ -108,7 +174,8 @@ fn windows_one_at_a_time_give_the_batch_reconstruction_frame_by_frame() {
     }
     assert!(released.iter().all(|&n| n > 0 && n < aligned.timeline.frames), "frames came out per window: {released:?}");
     // A window that starts before frames already given out is refused.
-    let late = ego_pass(&aligned, &plan.windows[0], tracking, CoarsePoseSource::RestPose).unwrap();
+    let late =
+        ego_pass(&aligned, &plan.windows[0], tracking, CoarsePoseSource::RestPose, &mut StageTimer::off()).unwrap();
     assert!(assembler.add(&egoexo_infer::passes::WindowOutput::from_coarse(&late)).is_err());
 
     let streamed = assemble_reconstruction(Method::EgoExo, tracking, &aligned, frames, aligned.floor_y).unwrap();
@@ -126,7 +193,8 @@ fn a_root_output_collapsing_mid_turn_decodes_on_the_turn() {
     let options = ReconstructOptions { stride: egoexo_infer::windows::WINDOW, ..ReconstructOptions::default() };
     let plan = ReconstructionPlan::new(&aligned, TrackingMode::OnePoint, &options.windows(), 1).unwrap();
     let window = &plan.windows[0];
-    let ego = ego_pass(&aligned, window, TrackingMode::OnePoint, CoarsePoseSource::RestPose).unwrap();
+    let ego =
+        ego_pass(&aligned, window, TrackingMode::OnePoint, CoarsePoseSource::RestPose, &mut StageTimer::off()).unwrap();
     let mut output = WindowOutput::from_coarse(&ego);
     output.r_world_window = Quat::IDENTITY;
     // The wearer turns 6° a frame; over frames 40..=43 the network hesitates: its first

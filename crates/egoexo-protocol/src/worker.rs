@@ -593,6 +593,22 @@ pub struct ReconstructionSummary {
     /// Per observer: frames where it contributed at least one ray.
     pub observer_ray_frames: BTreeMap<String, usize>,
     pub accuracy: Option<Accuracy>,
+    /// Where the job's time went, per stage in pipeline order (import and align of the open
+    /// session, the engine's stages, the scene); empty when the worker has no clock.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub timings: Vec<StageTiming>,
+}
+
+/// One stage's time in a job ([`ReconstructionSummary::timings`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StageTiming {
+    /// `import`, `align`, `ego-features`, `egonet`, `exo-features`, `gate`, `fusion`,
+    /// `decode` or `scene`.
+    pub stage: String,
+    /// Milliseconds, summed over its calls.
+    pub ms: f64,
+    /// How many times it ran (windows, for the engine's stages).
+    pub calls: u32,
 }
 
 #[cfg(test)]

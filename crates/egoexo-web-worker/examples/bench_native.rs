@@ -3,12 +3,17 @@
 //! ego-exo + ego-only overlay + scene JSON), timed here with the clock. `cargo xtask bench-web`
 //! runs it next to the page and prints the ratio.
 //!
+//! Per stage, the worker's own timings of a fresh open (import, align) and the whole job, as
+//! the page reports them, plus an npz export.
+//!
 //! `cargo run --release -p egoexo-web-worker --example bench_native -- MODELS_DIR SESSION [RUNS]`
 
+use std::collections::BTreeMap;
 use std::time::Instant;
 
 use egoexo_infer::InferError;
-use egoexo_web_worker::SessionWorker;
+use egoexo_protocol::worker::ExportFormat;
+use egoexo_web_worker::{SessionWorker, WorkerClock};
 
 fn median(mut xs: Vec<f64>) -> f64 {
     xs.sort_by(f64::total_cmp);
@@ -28,8 +33,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     worker.load_models(&manifest, |file| {
         std::fs::read(dir.join(file)).map_err(|e| InferError::ReadModel { file: file.into(), message: e.to_string() })
     })?;
-    let summary = worker.import_archive(session, std::fs::read(session)?)?;
-    let mut time = |overlay: bool| -> Result<f64, Box<dyn std::error::Error>> {
+    let origin = Instant::now();
+    worker.set_clock(WorkerClock::new(move || origin.elapsed().as_secs_f64() * 1e3));
+    let archive = std::fs::read(session)?;
+    let summary = worker.import_archive(session, archive.clone())?;
+    let time = |worker: &mut SessionWorker, overlay: bool| -> Result<f64, Box<dyn std::error::Error>> {
         let started = Instant::now();
         worker.reconstruct(overlay, &mut |_| true)?;
         if overlay {
@@ -37,19 +45,43 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         Ok(started.elapsed().as_secs_f64())
     };
-    time(false)?;
+    time(&mut worker, false)?;
     let (mut ego_exo, mut app) = (Vec::new(), Vec::new());
+    let mut stage_runs: Vec<BTreeMap<String, f64>> = Vec::new();
     for _ in 0..runs.max(1) {
-        ego_exo.push(time(false)?);
-        app.push(time(true)?);
+        ego_exo.push(time(&mut worker, false)?);
+        worker.import_archive(session, archive.clone())?;
+        app.push(time(&mut worker, true)?);
+        let mut stages: BTreeMap<String, f64> = BTreeMap::new();
+        for t in worker.reconstruction_summary().map(|s| s.timings.clone()).unwrap_or_default() {
+            stages.insert(t.stage, t.ms);
+        }
+        let started = Instant::now();
+        worker.export(ExportFormat::Npz)?;
+        stages.insert("export".into(), started.elapsed().as_secs_f64() * 1e3);
+        stage_runs.push(stages);
     }
+    let names: Vec<String> = stage_runs
+        .iter()
+        .flat_map(|r| r.keys().cloned())
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let stages: Vec<serde_json::Value> = names
+        .iter()
+        .map(|name| {
+            let ms = median(stage_runs.iter().map(|r| r.get(name).copied().unwrap_or(0.0)).collect());
+            serde_json::json!({ "stage": name, "ms": ms })
+        })
+        .collect();
     let frames = summary.frames as f64;
-    println!(
-        "BENCH_NATIVE {{\"frames\":{},\"runs\":{},\"median_fps\":{},\"median_app_fps\":{}}}",
-        summary.frames,
-        runs.max(1),
-        frames / median(ego_exo),
-        frames / median(app)
-    );
+    let result = serde_json::json!({
+        "frames": summary.frames,
+        "runs": runs.max(1),
+        "median_fps": frames / median(ego_exo),
+        "median_app_fps": frames / median(app),
+        "stages": stages,
+    });
+    println!("BENCH_NATIVE {result}");
     Ok(())
 }

@@ -11,6 +11,8 @@
 //!   page ↔ worker protocol (`egoexo_protocol::worker`, `docs/worker-protocol.md`), model
 //!   fetching with the Cache API, cooperative cancel between windows, panic reporting.
 //!
+//! - [`bench`] — the bench page's network probe (`NetworkBench` in JS): one network on
+//!   deterministic inputs, its FLOPs and a matrix-product probe, timed by the page.
 //! - [`live`] — [`live::LiveReconstructor`]: a take streaming in from the live relay,
 //!   reconstructed window by window at a chosen lookahead, one frame to draw at a time.
 //! - [`xr`] — the WebXR page's (`web/xr.html`) poses, frames and messages of the live
@@ -19,6 +21,7 @@
 //! `web/worker.js` only creates the `WorkerApp` and hands it the page's messages. Nothing
 //! here reads the clock or spawns threads; timing belongs to the page.
 
+pub mod bench;
 pub mod live;
 #[cfg(target_arch = "wasm32")]
 mod runtime;
@@ -28,4 +31,4 @@ pub mod xr;
 
 #[cfg(target_arch = "wasm32")]
 pub use runtime::{MODEL_CACHE, TEST_PANIC_MESSAGE, WorkerApp};
-pub use worker::{ExportedFile, JobProgress, ReconstructionTask, SessionWorker, WorkerError};
+pub use worker::{ExportedFile, JobProgress, ReconstructionTask, SessionWorker, WorkerClock, WorkerError};

@@ -8,7 +8,7 @@
 //!   its next window);
 //! - a reconstruction runs one window per step and gives control back to the event loop
 //!   between steps (a `MessageChannel` round trip, well under a millisecond), which is where a
-//!   `cancel` is read; nothing here reads a clock;
+//!   `cancel` is read; nothing here reads a clock itself (stage timings use the glue's, passed in);
 //! - the models are fetched from the models URL (`manifest.json`, then the files it lists),
 //!   kept in the Cache API keyed by their sha256, checked and loaded by [`SessionWorker`];
 //!   a failure with cached files clears them and fetches once more;
@@ -39,7 +39,7 @@ use egoexo_share::envelope;
 use egoexo_share::{ShareError, ShareKey};
 use web_sys::{AesGcmParams, Crypto, CryptoKey, SubtleCrypto};
 
-use crate::worker::{SessionWorker, WorkerError};
+use crate::worker::{SessionWorker, WorkerClock, WorkerError};
 
 type Request = WorkerRequest<JsBytes>;
 type Event = WorkerEvent<JsBytes>;
@@ -82,16 +82,24 @@ impl WorkerApp {
     /// folder holding `manifest.json` (absolute, or relative to the worker script).
     ///
     /// `clock` (optional) returns the time in Unix milliseconds (`performance.timeOrigin +
-    /// performance.now()`); the live connection answers the relay's clock pings with it.
+    /// performance.now()`); the live connection answers the relay's clock pings with it, and
+    /// each reconstruction's summary reports its time per stage with it.
     #[wasm_bindgen(constructor)]
     pub fn new(models_url: &str, clock: Option<js_sys::Function>) -> Result<WorkerApp, JsValue> {
         let scope: DedicatedWorkerGlobalScope = js_sys::global().dyn_into()?;
         let models_url = Url::new_with_base(models_url, &scope.location().href())?.href();
         install_panic_reporter();
+        let mut worker = SessionWorker::new();
+        if let Some(clock) = clock.clone() {
+            // Stage timings of each job (the summary's `timings`): the glue's clock, passed in.
+            worker.set_clock(WorkerClock::new(move || {
+                clock.call0(&JsValue::UNDEFINED).ok().and_then(|v| v.as_f64()).unwrap_or(f64::NAN)
+            }));
+        }
         let runtime = Rc::new(Runtime {
             scope,
             models_url,
-            worker: RefCell::new(SessionWorker::new()),
+            worker: RefCell::new(worker),
             queue: RefCell::new(VecDeque::new()),
             running: Cell::new(false),
             current: Cell::new(None),

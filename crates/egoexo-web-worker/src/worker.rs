@@ -6,6 +6,7 @@
 //! [`WorkerError`], whose [`WorkerError::kind`] is what the page sees.
 
 use std::collections::BTreeMap;
+use std::rc::Rc;
 use std::sync::Arc;
 
 use egoexo_core::SmplMotion;
@@ -15,6 +16,7 @@ use egoexo_core::metrics::MetricsAccumulator;
 use egoexo_infer::manifest::Manifest;
 use egoexo_infer::{
     InferError, LoadedModels, Method, NetworkRuns, ReconstructOptions, Reconstruction, ReconstructionJob, Stage,
+    StageTimer, StageTimings, TimedStage,
 };
 use egoexo_motion_io::{ExportError, Format};
 use egoexo_protocol::worker::{
@@ -93,6 +95,8 @@ struct OpenSession {
     imported: Imported,
     aligned: AlignedSession,
     summary: SessionSummary,
+    /// Import and align of this session (with the worker's clock).
+    timings: StageTimings,
 }
 
 /// What is shown: a reconstruction made here, or one opened from a share.
@@ -146,6 +150,32 @@ pub struct ReconstructionTask {
     runs_before: NetworkRuns,
 }
 
+/// A clock in milliseconds (any origin) handed to the worker by its host: the page glue's
+/// `performance.now()` in the browser, `Instant` natively. The worker never reads one itself.
+#[derive(Clone, Default)]
+pub struct WorkerClock(Option<Rc<dyn Fn() -> f64>>);
+
+impl WorkerClock {
+    pub fn new(now_ms: impl Fn() -> f64 + 'static) -> Self {
+        WorkerClock(Some(Rc::new(now_ms)))
+    }
+
+    /// The clock as a [`egoexo_infer::Clock`] (reading 0 without one).
+    fn now_fn(&self) -> impl FnMut() -> f64 + '_ {
+        move || self.0.as_ref().map_or(0.0, |now| now())
+    }
+
+    fn is_set(&self) -> bool {
+        self.0.is_some()
+    }
+}
+
+impl std::fmt::Debug for WorkerClock {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(if self.is_set() { "WorkerClock(set)" } else { "WorkerClock(none)" })
+    }
+}
+
 /// The worker: models, the open session and its reconstructions.
 #[derive(Debug, Default)]
 pub struct SessionWorker {
@@ -153,11 +183,31 @@ pub struct SessionWorker {
     manifest: Option<Manifest>,
     session: Option<OpenSession>,
     results: Option<Results>,
+    /// Times each stage of a job when set ([`ReconstructionSummary::timings`]).
+    clock: WorkerClock,
 }
 
 impl SessionWorker {
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Times every stage of the jobs from now on with `clock` (reported in
+    /// [`ReconstructionSummary::timings`]).
+    pub fn set_clock(&mut self, clock: WorkerClock) {
+        self.clock = clock;
+    }
+
+    /// Runs `f` as `stage`, timed when the worker has a clock.
+    fn timed<T>(&self, timings: &mut StageTimings, stage: TimedStage, f: impl FnOnce() -> T) -> T {
+        if !self.clock.is_set() {
+            return f();
+        }
+        let mut now = self.clock.now_fn();
+        let mut timer = StageTimer::new(&mut now);
+        let out = timer.time(stage, f);
+        timings.merge(&timer.timings);
+        out
     }
 
     /// The files a manifest lists (paths relative to the models folder), for the caller to
@@ -227,17 +277,29 @@ impl SessionWorker {
     pub fn import(&mut self, tree: &FileTree) -> Result<SessionSummary, WorkerError> {
         self.session = None;
         self.results = None;
-        self.open_imported(import_session(tree, &ImportOptions::default())?)
+        let mut timings = StageTimings::default();
+        let imported =
+            self.timed(&mut timings, TimedStage::Import, || import_session(tree, &ImportOptions::default()))?;
+        self.open_imported_timed(imported, timings)
     }
 
     /// Opens a session imported elsewhere (the CLI imports with its own options); replaces
     /// the open session.
     pub fn open_imported(&mut self, imported: Imported) -> Result<SessionSummary, WorkerError> {
+        self.open_imported_timed(imported, StageTimings::default())
+    }
+
+    fn open_imported_timed(
+        &mut self,
+        imported: Imported,
+        mut timings: StageTimings,
+    ) -> Result<SessionSummary, WorkerError> {
         self.session = None;
         self.results = None;
-        let aligned = align_for(&imported, self.fps())?;
+        let fps = self.fps();
+        let aligned = self.timed(&mut timings, TimedStage::Align, || align_for(&imported, fps))?;
         let summary = session_summary(&imported, &aligned);
-        self.session = Some(OpenSession { imported, aligned, summary: summary.clone() });
+        self.session = Some(OpenSession { imported, aligned, summary: summary.clone(), timings });
         Ok(summary)
     }
 
@@ -260,6 +322,7 @@ impl SessionWorker {
         let open = self.session.as_mut().ok_or(WorkerError::NoSession)?;
         if open.aligned.timeline.fps != fps {
             open.aligned = align_for(&open.imported, fps)?;
+            open.timings = StageTimings::default();
         }
         self.results = None;
         let methods: &[Method] = if ego_only_overlay { &[Method::EgoExo, Method::EgoOnly] } else { &[Method::EgoExo] };
@@ -272,7 +335,13 @@ impl SessionWorker {
     pub fn step_reconstruction(&self, task: &mut ReconstructionTask) -> Result<Option<JobProgress>, WorkerError> {
         let engine = self.models.as_ref().ok_or(WorkerError::NoModels)?.offline();
         let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
-        let Some(progress) = task.job.step(engine, &open.aligned)? else { return Ok(None) };
+        let progress = if self.clock.is_set() {
+            let mut now = self.clock.now_fn();
+            task.job.step_timed(engine, &open.aligned, &mut now)?
+        } else {
+            task.job.step(engine, &open.aligned)?
+        };
+        let Some(progress) = progress else { return Ok(None) };
         let stage = match progress.stage {
             Stage::Ego => JobStage::EgoPass,
             Stage::Fusion(Method::EgoOnly) => JobStage::EgoOnlyOverlay,
@@ -288,13 +357,27 @@ impl SessionWorker {
         let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
         let windows = task.job.plan().windows.len();
         let runs = engine.network_runs() - task.runs_before;
-        let mut reconstructions = task.job.finish(&open.aligned)?.into_iter();
+        let (reconstructions, mut timings) = if self.clock.is_set() {
+            let mut now = self.clock.now_fn();
+            task.job.finish_timed(&open.aligned, &mut now)?
+        } else {
+            (task.job.finish(&open.aligned)?, StageTimings::default())
+        };
+        let mut reconstructions = reconstructions.into_iter();
         let ego_exo = reconstructions.next().ok_or(WorkerError::NoReconstruction)?;
         let ego_only = reconstructions.next();
-        let summary = reconstruction_summary(&open.aligned, &ego_exo, ego_only.as_ref(), windows, runs);
-        let scene = crate::scene::build_scene(&open.aligned, &ego_exo, ego_only.as_ref());
-        scene.check().map_err(WorkerError::Scene)?;
-        let scene_json = serde_json::to_vec(&scene).map_err(|e| WorkerError::Scene(e.to_string()))?;
+        let mut summary = reconstruction_summary(&open.aligned, &ego_exo, ego_only.as_ref(), windows, runs);
+        let scene_json = self.timed(&mut timings, TimedStage::Scene, || {
+            let scene = crate::scene::build_scene(&open.aligned, &ego_exo, ego_only.as_ref());
+            scene.check().map_err(WorkerError::Scene)?;
+            serde_json::to_vec(&scene).map_err(|e| WorkerError::Scene(e.to_string()))
+        })?;
+        timings.merge(&open.timings);
+        summary.timings = timings
+            .stages
+            .iter()
+            .map(|s| protocol::StageTiming { stage: s.stage.name().to_string(), ms: s.ms, calls: s.calls })
+            .collect();
         self.results = Some(Results {
             name: open.aligned.name.clone(),
             method: ego_exo.method.name().to_string(),
@@ -558,5 +641,6 @@ fn reconstruction_summary(
         exo_evidence_frames: ego_exo.exo_evidence.iter().filter(|&&v| v).count(),
         observer_ray_frames: observers_used.into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
         accuracy,
+        timings: Vec::new(),
     }
 }

@@ -201,6 +201,38 @@ fn without_the_overlay_only_one_pass_runs() {
 }
 
 #[test]
+fn with_a_clock_the_summary_says_where_the_time_went_stage_by_stage() {
+    // Without a clock: no timings (and the recording's summary is unchanged).
+    let (worker, _) = reconstructed();
+    assert!(worker.reconstruction_summary().unwrap().timings.is_empty());
+
+    // A clock that advances 1 ms per reading: each timed call takes exactly 1 ms.
+    let now = std::cell::Cell::new(0.0);
+    let mut worker = worker_with_models();
+    worker.set_clock(egoexo_web_worker::WorkerClock::new(move || {
+        now.set(now.get() + 1.0);
+        now.get()
+    }));
+    worker.import_archive(SESSION_NAME, SESSION.to_vec()).unwrap();
+    let summary = worker.reconstruct(true, &mut |_| true).unwrap();
+    let stages: Vec<&str> = summary.timings.iter().map(|t| t.stage.as_str()).collect();
+    assert_eq!(
+        stages,
+        ["import", "align", "ego-features", "egonet", "exo-features", "gate", "fusion", "decode", "scene"],
+        "pipeline order"
+    );
+    let get = |stage: &str| summary.timings.iter().find(|t| t.stage == stage).unwrap();
+    let windows = summary.windows as u32;
+    assert_eq!((get("egonet").calls, get("egonet").ms), (windows, f64::from(windows)), "EgoNet once per window");
+    assert_eq!(get("gate").calls, windows, "the gate only for ego-exo");
+    assert_eq!(get("fusion").calls, 2 * windows, "fusion for ego-exo and the overlay");
+    assert_eq!((get("import").calls, get("scene").calls), (1, 1));
+    // The same result as without a clock.
+    let (untimed, _) = reconstructed();
+    assert_eq!(worker.scene_json().unwrap(), untimed.scene_json().unwrap());
+}
+
+#[test]
 fn the_scene_holds_everything_the_viewer_draws() {
     let (worker, _) = reconstructed();
     let scene: SceneData = serde_json::from_slice(&worker.scene_json().unwrap()).unwrap();

@@ -2,11 +2,13 @@
 //! the same engine the app runs.
 
 use std::path::PathBuf;
+use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use egoexo_core::TrackingMode;
+use egoexo_infer::job::PARALLEL_CHUNK;
 use egoexo_infer::plan::resolve_tracking;
-use egoexo_infer::{Engine, Method, ReconstructOptions, Stage};
+use egoexo_infer::{Engine, Method, Progress, ReconstructOptions, Stage, StageTimer, StageTimings, TimedStage};
 use egoexo_motion_io::{Format, write};
 use egoexo_session::align::{AlignOptions, align};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -40,6 +42,14 @@ pub struct Args {
     /// Replace an existing output file.
     #[arg(long)]
     pub force: bool,
+    /// Threads the session's windows are spread over [default: every core]; 1 runs them one
+    /// after another.
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+    /// Print the median milliseconds per stage (import, align, ego features, EgoNet, exo
+    /// features, gate, fusion, decode, export) over this many runs of the whole job.
+    #[arg(long, value_name = "RUNS", num_args = 0..=1, default_missing_value = "5")]
+    pub timings: Option<u32>,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -49,11 +59,16 @@ pub fn run(args: Args) -> Result<()> {
     let json = args.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("json"));
     let format = if json { None } else { Some(Format::from_path(&args.output.to_string_lossy())?) };
 
-    let imported = args.input.import()?;
+    let started = Instant::now();
+    let mut clock = move || started.elapsed().as_secs_f64() * 1e3;
+    let mut first = StageTimer::new(&mut clock);
+    let imported = first.time(TimedStage::Import, || args.input.import())?;
     for warning in &imported.warnings {
         eprintln!("warning: {warning}");
     }
-    let aligned = align(&imported.session, &AlignOptions { fps: args.fps, ..AlignOptions::default() })?;
+    let align_options = AlignOptions { fps: args.fps, ..AlignOptions::default() };
+    let aligned = first.time(TimedStage::Align, || align(&imported.session, &align_options))?;
+    let setup = first.timings;
     let tracking = resolve_tracking(&aligned, args.tracking.map(TrackingMode::from))?;
     if args.tracking.is_none()
         && let Some(reason) = aligned.tracking_choice().reason
@@ -72,7 +87,8 @@ pub fn run(args: Args) -> Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let options = ReconstructOptions { method, tracking: Some(tracking), ..ReconstructOptions::default() };
-    let recon = engine.reconstruct(&aligned, &options, &mut |p| {
+    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())).max(1);
+    let mut show = |p: Progress| {
         bar.set_message(match p.stage {
             Stage::Ego => "ego",
             Stage::Fusion(_) => "fusion",
@@ -80,13 +96,31 @@ pub fn run(args: Args) -> Result<()> {
         bar.set_length(p.total as u64);
         bar.set_position(p.done as u64);
         true
-    })?;
+    };
+    let mut job = engine.start(&aligned, &options, &[method])?;
+    // Stage timings are per stage of one thread: `--timings` runs the windows in order.
+    let (recons, mut timings) = if threads > 1 && args.timings.is_none() {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+        pool.install(|| job.run_in_parallel(&engine, &aligned, PARALLEL_CHUNK, &mut show))?;
+        (job.finish(&aligned)?, StageTimings::default())
+    } else {
+        while let Some(p) = job.step_timed(&engine, &aligned, &mut clock)? {
+            show(p);
+        }
+        job.finish_timed(&aligned, &mut clock)?
+    };
+    let recon = recons.into_iter().next().context("the engine returned no reconstruction")?;
     bar.finish_and_clear();
 
-    let bytes = match format {
-        Some(format) => write(format, &recon.motion)?,
-        None => serde_json::to_vec(&recon)?,
-    };
+    let mut timer = StageTimer::new(&mut clock);
+    let bytes = timer.time(TimedStage::Export, || -> Result<Vec<u8>> {
+        Ok(match format {
+            Some(format) => write(format, &recon.motion)?,
+            None => serde_json::to_vec(&recon)?,
+        })
+    })?;
+    timings.merge(&setup);
+    timings.merge(&timer.timings);
     std::fs::write(&args.output, bytes).with_context(|| format!("cannot write {}", args.output.display()))?;
     let untracked = recon.valid.iter().filter(|v| !**v).count();
     let evidence = recon.exo_evidence.iter().filter(|v| **v).count();
@@ -100,5 +134,104 @@ pub fn run(args: Args) -> Result<()> {
         evidence,
         if untracked > 0 { format!(", {untracked} untracked frames hold the nearest pose") } else { String::new() }
     );
+    if let Some(runs) = args.timings {
+        print_timings(&args, &engine, &options, method, format, (timings, recon.motion.len()), runs.max(1))?;
+        print_scaling(&engine, &aligned, &options, method, threads, runs.max(1))?;
+    }
+    Ok(())
+}
+
+/// `--timings`: the engine's wall time with the windows on 1, 2, 4, … `threads` threads
+/// (median of `runs` each) against the sequential job, as frames per second and speed-up.
+fn print_scaling(
+    engine: &Engine,
+    aligned: &egoexo_core::aligned::AlignedSession,
+    options: &ReconstructOptions,
+    method: Method,
+    threads: usize,
+    runs: u32,
+) -> Result<()> {
+    let frames = aligned.timeline.frames as f64;
+    let median_s = |f: &mut dyn FnMut() -> Result<()>| -> Result<f64> {
+        let mut times = Vec::new();
+        for _ in 0..runs {
+            let started = Instant::now();
+            f()?;
+            times.push(started.elapsed().as_secs_f64());
+        }
+        Ok(egoexo_infer::timing::median(&times))
+    };
+    let sequential = median_s(&mut || {
+        engine.reconstruct(aligned, &ReconstructOptions { method, ..*options }, &mut |_| true)?;
+        Ok(())
+    })?;
+    println!("threads (engine only, median of {runs}): sequential {:.0} frames/s", frames / sequential);
+    let mut counts: Vec<usize> = (0..).map(|i| 1 << i).take_while(|&n| n < threads).collect();
+    counts.push(threads);
+    for n in counts {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build()?;
+        let s = median_s(&mut || {
+            pool.install(|| engine.reconstruct_each_in_parallel(aligned, options, &[method], &mut |_| true))?;
+            Ok(())
+        })?;
+        println!(
+            "  {n:>2} thread{}: {:>8.0} frames/s, {:.2}x sequential",
+            if n == 1 { " " } else { "s" },
+            frames / s,
+            sequential / s
+        );
+    }
+    Ok(())
+}
+
+/// `--timings`: the whole job `runs` times (the first run is the one that wrote the output),
+/// median milliseconds per stage and frames per second.
+fn print_timings(
+    args: &Args,
+    engine: &Engine,
+    options: &ReconstructOptions,
+    method: Method,
+    format: Option<Format>,
+    (first, mut frames): (StageTimings, usize),
+    runs: u32,
+) -> Result<()> {
+    let started = Instant::now();
+    let mut clock = move || started.elapsed().as_secs_f64() * 1e3;
+    let mut all = vec![first];
+    for _ in 1..runs {
+        let mut timer = StageTimer::new(&mut clock);
+        let imported = timer.time(TimedStage::Import, || args.input.import())?;
+        let align_options = AlignOptions { fps: args.fps, ..AlignOptions::default() };
+        let aligned = timer.time(TimedStage::Align, || align(&imported.session, &align_options))?;
+        let setup = timer.timings;
+        let mut job = engine.start(&aligned, options, &[method])?;
+        while job.step_timed(engine, &aligned, &mut clock)?.is_some() {}
+        let (recons, mut timings) = job.finish_timed(&aligned, &mut clock)?;
+        let recon = recons.into_iter().next().context("the engine returned no reconstruction")?;
+        frames = recon.motion.len();
+        let mut timer = StageTimer::new(&mut clock);
+        timer.time(TimedStage::Export, || -> Result<()> {
+            match format {
+                Some(format) => drop(write(format, &recon.motion)?),
+                None => drop(serde_json::to_vec(&recon)?),
+            }
+            Ok(())
+        })?;
+        timings.merge(&setup);
+        timings.merge(&timer.timings);
+        all.push(timings);
+    }
+    let median = StageTimings::median(&all);
+    println!("timings: median of {runs} runs, {method}, {frames} frames, one thread");
+    print!("{}", median.table());
+    let total = median.total_ms();
+    let networks: f64 = median.stages.iter().filter(|s| s.stage.is_network()).map(|s| s.ms).sum();
+    if frames > 0 && total > 0.0 {
+        println!(
+            "{:.0} frames/s for the whole job; networks {:.0}% of it",
+            frames as f64 / (total / 1e3),
+            100.0 * networks / total
+        );
+    }
     Ok(())
 }

@@ -44,7 +44,7 @@ async function main() {
   const list = await (await fetch(samples)).json();
   const sample = list.samples[0];
   const bytes = new Uint8Array(await (await fetch(new URL(sample.file, samples))).arrayBuffer());
-  const { summary } = await request((c) => c.open_archive(sample.file, bytes));
+  const { summary } = await request((c) => c.open_archive(sample.file, bytes.slice()));
   const frames = summary.frames;
   say(`${sample.file}: ${frames} frames, ${summary.observers.length} observers, ${summary.tracking_points}-point tracking`);
   // Milliseconds from asking to the scene's arrival (the worker cannot read a clock).
@@ -62,7 +62,7 @@ async function main() {
   const stageRuns = [];
   for (let i = 0; i < runs; i += 1) {
     egoExo.push(await time(false));
-    await request((c) => c.open_archive(sample.file, bytes));
+    await request((c) => c.open_archive(sample.file, bytes.slice()));
     const started = performance.now();
     const { summary: job } = await request((c) => c.reconstruct(true));
     appJob.push(performance.now() - started);

@@ -138,8 +138,10 @@ pub struct ImportWarning {
 }
 
 impl fmt::Display for ImportWarning {
+    /// `file: message`, or the message alone when the warning is about the whole session
+    /// (no file: a dropped folder's root has an empty path).
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}: {}", self.file, self.message)
+        if self.file.is_empty() { f.write_str(&self.message) } else { write!(f, "{}: {}", self.file, self.message) }
     }
 }
 
@@ -174,6 +176,13 @@ pub(crate) fn check_strictly_after(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_warning_about_the_whole_session_has_no_stray_colon() {
+        let w = |file: &str| ImportWarning { file: file.into(), message: "one device: no observers".into() };
+        assert_eq!(w("").to_string(), "one device: no observers");
+        assert_eq!(w("wearer/a.csv").to_string(), "wearer/a.csv: one device: no observers");
+    }
 
     #[test]
     fn message_names_file_line_field_and_expectation() {

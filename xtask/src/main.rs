@@ -215,7 +215,7 @@ pub(crate) fn print_network_table(web: Option<&serde_json::Value>, native: &serd
         let native_share = ratio(num(n, "gflops"), num(n, "attainable_gflops"));
         println!(
             "  {name:<7} {:>8} {:>9} {:>7} {:>9} {:>13} {:>13} {:>8} {:>8} {:>15}",
-            cell(num(n, "flops").map(|f| f / 1e6), 2),
+            cell(num(n, "flops").or_else(|| get("flops")).map(|f| f / 1e6), 2),
             cell(get("tract_ms"), 3),
             cell(get("ort_ms"), 3),
             cell(get("ratio"), 2),

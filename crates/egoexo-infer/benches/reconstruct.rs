@@ -5,38 +5,17 @@
 //! reconstructions (EgoNet twice). Run with `cargo bench -p egoexo-infer`; criterion reports
 //! medians, and the throughput lines give frames per second.
 
-use std::path::{Path, PathBuf};
+mod common;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use egoexo_core::TrackingMode;
 use egoexo_core::aligned::AlignedSession;
-use egoexo_infer::manifest::Manifest;
-use egoexo_infer::models::ModelSet;
-use egoexo_infer::{Engine, InferError, Method, ReconstructOptions};
+use egoexo_infer::{Engine, Method, ReconstructOptions};
 use egoexo_session::align::{AlignOptions, align};
 use egoexo_synth::procedural::walking_circle;
 use egoexo_synth::{SynthConfig, simulate};
 
-fn models_dir() -> PathBuf {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let shipped = root.join("models");
-    if shipped.join("manifest.json").exists() {
-        shipped
-    } else {
-        eprintln!("models/ has no manifest.json: benchmarking the untrained fixture networks instead");
-        root.join("crates/egoexo-infer/tests/fixtures/models")
-    }
-}
-
 fn engine() -> Engine {
-    let dir = models_dir();
-    let manifest =
-        Manifest::from_json(&std::fs::read(dir.join("manifest.json")).expect("manifest")).expect("valid manifest");
-    let set = ModelSet::load(manifest.model_set(TrackingMode::ThreePoint).expect("3-point models"), |f| {
-        std::fs::read(dir.join(f)).map_err(|e| InferError::ReadModel { file: f.into(), message: e.to_string() })
-    })
-    .expect("models load");
-    Engine::new().with_models(set)
+    Engine::new().with_models(common::three_point_models())
 }
 
 fn session(observers: usize) -> AlignedSession {

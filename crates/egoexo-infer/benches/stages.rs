@@ -4,35 +4,23 @@
 //! into motion — the stages of `egoexo reconstruct --timings`. Run with
 //! `cargo bench -p egoexo-infer --bench stages`; throughput is in windows.
 
-use std::path::{Path, PathBuf};
+mod common;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use egoexo_core::TrackingMode;
 use egoexo_core::aligned::AlignedSession;
 use egoexo_infer::decode::{MotionAssembler, assemble_reconstruction};
 use egoexo_infer::inputs::ego_window;
-use egoexo_infer::manifest::Manifest;
 use egoexo_infer::models::ModelSet;
 use egoexo_infer::passes::{CoarsePoseSource, ExoMode, coarse_pose_with, ego_pass, exo_pass, fusion_pass};
 use egoexo_infer::plan::ReconstructionPlan;
-use egoexo_infer::{InferError, Method, ReconstructOptions, StageTimer};
+use egoexo_infer::{Method, ReconstructOptions, StageTimer};
 use egoexo_session::align::{AlignOptions, align};
 use egoexo_synth::procedural::walking_circle;
 use egoexo_synth::{SynthConfig, simulate};
 
 fn models() -> ModelSet {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let mut dir: PathBuf = root.join("models");
-    if !dir.join("manifest.json").exists() {
-        eprintln!("models/ has no manifest.json: benchmarking the untrained fixture networks instead");
-        dir = root.join("crates/egoexo-infer/tests/fixtures/models");
-    }
-    let manifest =
-        Manifest::from_json(&std::fs::read(dir.join("manifest.json")).expect("manifest")).expect("valid manifest");
-    ModelSet::load(manifest.model_set(TrackingMode::ThreePoint).expect("3-point models"), |f| {
-        std::fs::read(dir.join(f)).map_err(|e| InferError::ReadModel { file: f.into(), message: e.to_string() })
-    })
-    .expect("models load")
+    common::three_point_models()
 }
 
 fn session() -> AlignedSession {

@@ -4,31 +4,17 @@
 //! (`Engine::reconstruct_each`) as the in-run reference. Run with
 //! `cargo bench -p egoexo-infer --features parallel --bench threads`; throughput in frames.
 
-use std::path::Path;
+mod common;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use egoexo_core::TrackingMode;
-use egoexo_infer::manifest::Manifest;
-use egoexo_infer::models::ModelSet;
-use egoexo_infer::{Engine, InferError, Method, ReconstructOptions};
+use egoexo_infer::{Engine, Method, ReconstructOptions};
 use egoexo_session::align::{AlignOptions, align};
 use egoexo_synth::procedural::walking_circle;
 use egoexo_synth::{SynthConfig, simulate};
 
 fn engine() -> Engine {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let mut dir = root.join("models");
-    if !dir.join("manifest.json").exists() {
-        eprintln!("models/ has no manifest.json: benchmarking the untrained fixture networks instead");
-        dir = root.join("crates/egoexo-infer/tests/fixtures/models");
-    }
-    let manifest =
-        Manifest::from_json(&std::fs::read(dir.join("manifest.json")).expect("manifest")).expect("valid manifest");
-    let set = ModelSet::load(manifest.model_set(TrackingMode::ThreePoint).expect("3-point models"), |f| {
-        std::fs::read(dir.join(f)).map_err(|e| InferError::ReadModel { file: f.into(), message: e.to_string() })
-    })
-    .expect("models load");
-    Engine::new().with_models(set)
+    Engine::new().with_models(common::three_point_models())
 }
 
 fn threads(c: &mut Criterion) {

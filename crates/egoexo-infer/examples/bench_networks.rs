@@ -8,7 +8,7 @@
 use std::time::Instant;
 
 use egoexo_infer::cost::{MatmulProbe, bench_inputs, network_cost};
-use egoexo_infer::manifest::Manifest;
+use egoexo_infer::manifest::{Manifest, NETWORK_NAMES};
 use egoexo_infer::models::OnnxModel;
 use egoexo_infer::timing::median;
 
@@ -32,17 +32,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let points: u8 = args.get(1).map_or(Ok(3), |p| p.parse())?;
     let runs: usize = args.get(2).map_or(Ok(30), |r| r.parse())?;
     let manifest = Manifest::from_json(&std::fs::read(dir.join("manifest.json"))?)?;
-    let set = manifest
-        .model_sets
-        .iter()
-        .find(|s| s.tracking.points() == points && s.lookahead.is_none())
-        .ok_or_else(|| format!("no offline {points}-point model set"))?;
+    let set = manifest.model_set_for_points(points).ok_or_else(|| format!("no offline {points}-point model set"))?;
     println!(
         "{:<8} {:>9} {:>9} {:>9} {:>22} {:>10} {:>9}",
         "network", "MFLOP", "ms", "GFLOP/s", "dominant product", "attainable", "achieved"
     );
     let mut rows = Vec::new();
-    for (name, file) in [("egonet", &set.egonet), ("gate", &set.gate), ("fusion", &set.fusion)] {
+    for name in NETWORK_NAMES {
+        let file = set.network(name).ok_or("a network is missing")?;
         let bytes = std::fs::read(dir.join(&file.file))?;
         let shapes: Vec<Vec<usize>> = file.inputs.iter().map(|i| i.shape.clone()).collect();
         let cost = network_cost(&file.file, &bytes, &shapes)?;

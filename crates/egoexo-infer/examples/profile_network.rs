@@ -22,16 +22,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let network = args.get(2).map_or("fusion", String::as_str);
     let runs: usize = args.get(3).map_or(Ok(50), |r| r.parse())?;
     let manifest = Manifest::from_json(&std::fs::read(dir.join("manifest.json"))?)?;
-    let set = manifest
-        .model_sets
-        .iter()
-        .find(|s| s.tracking.points() == points && s.lookahead.is_none())
-        .ok_or("no such model set")?;
-    let file = match network {
-        "egonet" => &set.egonet,
-        "gate" => &set.gate,
-        _ => &set.fusion,
-    };
+    let set = manifest.model_set_for_points(points).ok_or_else(|| format!("no offline {points}-point model set"))?;
+    let file =
+        set.network(network).ok_or_else(|| format!("no network `{network}`: expected egonet, gate or fusion"))?;
     let bytes = std::fs::read(dir.join(&file.file))?;
     let mut model = tract_onnx::onnx().model_for_read(&mut Cursor::new(&bytes))?;
     for (i, shape) in file.input_shapes().iter().enumerate() {

@@ -307,20 +307,14 @@ impl Engine {
         methods: &[Method],
         progress: &mut dyn FnMut(Progress) -> bool,
     ) -> Result<Vec<Reconstruction>, InferError> {
-        let mut results: Vec<Option<Reconstruction>> = vec![None; methods.len()];
-        for members in coarse_pose_groups(methods) {
-            let group: Vec<Method> = members.iter().map(|&i| methods[i]).collect();
-            let mut job = self.start(aligned, options, &group)?;
-            while let Some(p) = job.step(self, aligned)? {
+        self.run_jobs(aligned, options, methods, &mut |engine, job| {
+            while let Some(p) = job.step(engine, aligned)? {
                 if !progress(p) {
                     return Err(InferError::Cancelled);
                 }
             }
-            for (i, r) in members.into_iter().zip(job.finish(aligned)?) {
-                results[i] = Some(r);
-            }
-        }
-        results.into_iter().map(|r| r.ok_or(InferError::Methods("no method to run".into()))).collect()
+            Ok(())
+        })
     }
 
     /// [`Engine::reconstruct_each`] with each job's windows spread over the current rayon
@@ -333,11 +327,25 @@ impl Engine {
         methods: &[Method],
         progress: &mut dyn FnMut(Progress) -> bool,
     ) -> Result<Vec<Reconstruction>, InferError> {
+        self.run_jobs(aligned, options, methods, &mut |engine, job| {
+            job.run_in_parallel(engine, aligned, crate::job::PARALLEL_CHUNK, progress)
+        })
+    }
+
+    /// One job per group of methods sharing a coarse-pose source (groups in the order of
+    /// their first method), each run to the end by `run`; results in the order of `methods`.
+    fn run_jobs(
+        &self,
+        aligned: &AlignedSession,
+        options: &ReconstructOptions,
+        methods: &[Method],
+        run: &mut dyn FnMut(&Engine, &mut ReconstructionJob) -> Result<(), InferError>,
+    ) -> Result<Vec<Reconstruction>, InferError> {
         let mut results: Vec<Option<Reconstruction>> = vec![None; methods.len()];
         for members in coarse_pose_groups(methods) {
             let group: Vec<Method> = members.iter().map(|&i| methods[i]).collect();
             let mut job = self.start(aligned, options, &group)?;
-            job.run_in_parallel(self, aligned, crate::job::PARALLEL_CHUNK, progress)?;
+            run(self, &mut job)?;
             for (i, r) in members.into_iter().zip(job.finish(aligned)?) {
                 results[i] = Some(r);
             }

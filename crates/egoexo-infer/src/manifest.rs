@@ -36,6 +36,21 @@ pub struct ModelFile {
     pub outputs: Vec<TensorSpec>,
 }
 
+/// The networks of a model set, by the names benches and tools use.
+pub const NETWORK_NAMES: [&str; 3] = ["egonet", "gate", "fusion"];
+
+impl ModelSetManifest {
+    /// The file of network `name` (one of [`NETWORK_NAMES`]).
+    pub fn network(&self, name: &str) -> Option<&ModelFile> {
+        match name {
+            "egonet" => Some(&self.egonet),
+            "gate" => Some(&self.gate),
+            "fusion" => Some(&self.fusion),
+            _ => None,
+        }
+    }
+}
+
 impl ModelFile {
     /// The inputs' shapes, in declaration order.
     pub fn input_shapes(&self) -> Vec<Vec<usize>> {
@@ -184,7 +199,12 @@ impl Manifest {
 
     /// The offline model set for a tracking mode, if shipped.
     pub fn model_set(&self, tracking: TrackingMode) -> Option<&ModelSetManifest> {
-        self.model_sets.iter().find(|s| s.tracking == tracking && s.lookahead.is_none())
+        self.model_set_for_points(tracking.points())
+    }
+
+    /// [`Manifest::model_set`] by tracking points (1 or 3), as a command line or page names it.
+    pub fn model_set_for_points(&self, points: u8) -> Option<&ModelSetManifest> {
+        self.model_sets.iter().find(|s| s.tracking.points() == points && s.lookahead.is_none())
     }
 
     /// Every file of every set once (live variants share the offline EgoNet), in set order.

@@ -15,10 +15,8 @@ use egoexo_infer::InferError;
 use egoexo_protocol::worker::ExportFormat;
 use egoexo_web_worker::{SessionWorker, WorkerClock};
 
-fn median(mut xs: Vec<f64>) -> f64 {
-    xs.sort_by(f64::total_cmp);
-    let m = xs.len() / 2;
-    if xs.len() % 2 == 1 { xs[m] } else { 0.5 * (xs[m - 1] + xs[m]) }
+fn median(xs: Vec<f64>) -> f64 {
+    egoexo_infer::timing::median(&xs)
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -7,7 +7,7 @@
 
 use egoexo_infer::InferError;
 use egoexo_infer::cost::{MatmulProbe, MatmulShape, NetworkCost, bench_inputs, network_cost};
-use egoexo_infer::manifest::{Manifest, ModelFile};
+use egoexo_infer::manifest::{Manifest, ModelFile, NETWORK_NAMES};
 use egoexo_infer::models::OnnxModel;
 
 use crate::WorkerError;
@@ -27,22 +27,16 @@ impl NetworkBench {
     /// `points`-point set of `manifest_json` from its file's `bytes` (sha256-checked).
     pub fn load(manifest_json: &[u8], points: u8, network: &str, bytes: Vec<u8>) -> Result<Self, WorkerError> {
         let manifest = Manifest::from_json(manifest_json).map_err(WorkerError::Models)?;
-        let set = manifest
-            .model_sets
-            .iter()
-            .find(|s| s.tracking.points() == points && s.lookahead.is_none())
-            .ok_or(WorkerError::Models(InferError::NoModels { points }))?;
-        let file = match network {
-            "egonet" => &set.egonet,
-            "gate" => &set.gate,
-            "fusion" => &set.fusion,
-            other => {
-                return Err(WorkerError::Models(InferError::Manifest(format!(
-                    "no network `{other}`: expected egonet, gate or fusion"
-                ))));
-            }
-        }
-        .clone();
+        let set = manifest.model_set_for_points(points).ok_or(WorkerError::Models(InferError::NoModels { points }))?;
+        let file = set
+            .network(network)
+            .ok_or_else(|| {
+                WorkerError::Models(InferError::Manifest(format!(
+                    "no network `{network}`: expected {}",
+                    NETWORK_NAMES.join(", ")
+                )))
+            })?
+            .clone();
         let digest = egoexo_infer::manifest::sha256_hex(&bytes);
         if digest != file.sha256 {
             return Err(WorkerError::Models(InferError::Checksum {
@@ -112,6 +106,7 @@ mod js {
 
     /// `new NetworkBench(manifestBytes, points, network, modelBytes)`: see the module docs.
     #[wasm_bindgen(js_name = NetworkBench)]
+    #[derive(Debug)]
     pub struct JsNetworkBench(super::NetworkBench);
 
     #[wasm_bindgen(js_class = NetworkBench)]
@@ -193,12 +188,7 @@ mod tests {
     fn load(network: &str) -> Result<NetworkBench, WorkerError> {
         let manifest = std::fs::read(fixtures().join("manifest.json")).unwrap();
         let parsed = Manifest::from_json(&manifest).unwrap();
-        let set = parsed.model_sets.iter().find(|s| s.tracking.points() == 3).unwrap();
-        let file = match network {
-            "gate" => &set.gate,
-            "fusion" => &set.fusion,
-            _ => &set.egonet,
-        };
+        let file = parsed.model_set_for_points(3).unwrap().network(network).unwrap_or(&parsed.model_sets[0].egonet);
         NetworkBench::load(&manifest, 3, network, std::fs::read(fixtures().join(&file.file)).unwrap())
     }
 
@@ -222,7 +212,7 @@ mod tests {
     #[test]
     fn a_wrong_network_or_file_is_refused_by_name() {
         let err = load("decoder").unwrap_err().to_string();
-        assert!(err.contains("decoder") && err.contains("egonet, gate or fusion"), "{err}");
+        assert!(err.contains("decoder") && err.contains("egonet, gate, fusion"), "{err}");
         let manifest = std::fs::read(fixtures().join("manifest.json")).unwrap();
         let err = NetworkBench::load(&manifest, 3, "gate", b"not onnx".to_vec()).unwrap_err().to_string();
         assert!(err.contains("sha256"), "{err}");

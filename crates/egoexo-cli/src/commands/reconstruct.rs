@@ -61,14 +61,10 @@ pub fn run(args: Args) -> Result<()> {
 
     let started = Instant::now();
     let mut clock = move || started.elapsed().as_secs_f64() * 1e3;
-    let mut first = StageTimer::new(&mut clock);
-    let imported = first.time(TimedStage::Import, || args.input.import())?;
+    let (imported, aligned, setup) = import_and_align(&args, &mut clock)?;
     for warning in &imported.warnings {
         eprintln!("warning: {warning}");
     }
-    let align_options = AlignOptions { fps: args.fps, ..AlignOptions::default() };
-    let aligned = first.time(TimedStage::Align, || align(&imported.session, &align_options))?;
-    let setup = first.timings;
     let tracking = resolve_tracking(&aligned, args.tracking.map(TrackingMode::from))?;
     if args.tracking.is_none()
         && let Some(reason) = aligned.tracking_choice().reason
@@ -113,12 +109,7 @@ pub fn run(args: Args) -> Result<()> {
     bar.finish_and_clear();
 
     let mut timer = StageTimer::new(&mut clock);
-    let bytes = timer.time(TimedStage::Export, || -> Result<Vec<u8>> {
-        Ok(match format {
-            Some(format) => write(format, &recon.motion)?,
-            None => serde_json::to_vec(&recon)?,
-        })
-    })?;
+    let bytes = timer.time(TimedStage::Export, || encode(format, &recon))?;
     timings.merge(&setup);
     timings.merge(&timer.timings);
     std::fs::write(&args.output, bytes).with_context(|| format!("cannot write {}", args.output.display()))?;
@@ -139,6 +130,26 @@ pub fn run(args: Args) -> Result<()> {
         print_scaling(&engine, &aligned, &options, method, threads, runs.max(1))?;
     }
     Ok(())
+}
+
+/// Imports and aligns the session, timing both with `clock`.
+fn import_and_align(
+    args: &Args,
+    clock: &mut dyn egoexo_infer::Clock,
+) -> Result<(egoexo_session::import::Imported, egoexo_core::aligned::AlignedSession, StageTimings)> {
+    let mut timer = StageTimer::new(clock);
+    let imported = timer.time(TimedStage::Import, || args.input.import())?;
+    let options = AlignOptions { fps: args.fps, ..AlignOptions::default() };
+    let aligned = timer.time(TimedStage::Align, || align(&imported.session, &options))?;
+    Ok((imported, aligned, timer.timings))
+}
+
+/// The output file's bytes: the motion in `format`, or the whole reconstruction as JSON.
+fn encode(format: Option<Format>, recon: &egoexo_infer::Reconstruction) -> Result<Vec<u8>> {
+    Ok(match format {
+        Some(format) => write(format, &recon.motion)?,
+        None => serde_json::to_vec(recon)?,
+    })
 }
 
 /// `--timings`: the engine's wall time with the windows on 1, 2, 4, … `threads` threads
@@ -199,24 +210,14 @@ fn print_timings(
     let mut clock = move || started.elapsed().as_secs_f64() * 1e3;
     let mut all = vec![first];
     for _ in 1..runs {
-        let mut timer = StageTimer::new(&mut clock);
-        let imported = timer.time(TimedStage::Import, || args.input.import())?;
-        let align_options = AlignOptions { fps: args.fps, ..AlignOptions::default() };
-        let aligned = timer.time(TimedStage::Align, || align(&imported.session, &align_options))?;
-        let setup = timer.timings;
+        let (_, aligned, setup) = import_and_align(args, &mut clock)?;
         let mut job = engine.start(&aligned, options, &[method])?;
         while job.step_timed(engine, &aligned, &mut clock)?.is_some() {}
         let (recons, mut timings) = job.finish_timed(&aligned, &mut clock)?;
         let recon = recons.into_iter().next().context("the engine returned no reconstruction")?;
         frames = recon.motion.len();
         let mut timer = StageTimer::new(&mut clock);
-        timer.time(TimedStage::Export, || -> Result<()> {
-            match format {
-                Some(format) => drop(write(format, &recon.motion)?),
-                None => drop(serde_json::to_vec(&recon)?),
-            }
-            Ok(())
-        })?;
+        timer.time(TimedStage::Export, || encode(format, &recon))?;
         timings.merge(&setup);
         timings.merge(&timer.timings);
         all.push(timings);

@@ -45,7 +45,9 @@ async function compare({ points, runs }) {
   const ort = await loadOrt();
   const haveOrt = !ort.missing;
   const networks = [];
-  for (const network of ['egonet', 'gate', 'fusion']) {
+  // `fusion_ego_only` (the fusion with every observer masked) is in sets exported since it
+  // existed; older sets have three networks.
+  for (const network of ['egonet', 'gate', 'fusion', 'fusion_ego_only'].filter((n) => set[n])) {
     const bytes = await fetchBytes(new URL(set[network].file, modelsUrl));
     let started = performance.now();
     const tract = new NetworkBench(manifestBytes, points, network, bytes.slice());

@@ -8,12 +8,14 @@ writes a small untrained set with reference inputs/outputs (the engine's test fi
 import argparse
 import hashlib
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from .model import EGO_DIM, EGO_LAYOUT_VERSION, EXO_TOKEN_DIM, EXO_TOKEN_LAYOUT_VERSION, K, POSE_DIM, EgoNet, Fusion, Gate
+from .model import (EGO_DIM, EGO_LAYOUT_VERSION, EXO_TOKEN_DIM, EXO_TOKEN_LAYOUT_VERSION, K, POSE_DIM, EgoNet, Fusion,
+                    FusionEgoOnly, Gate)
 
 WINDOW = 96
 OPSET = 17
@@ -44,7 +46,9 @@ def export_one(module: torch.nn.Module, inputs: dict, input_names: list, output_
     path.parent.mkdir(parents=True, exist_ok=True)
     module.eval()
     args = tuple(inputs[name] for name in input_names)
-    with torch.no_grad():
+    with torch.no_grad(), warnings.catch_warnings():
+        # Shape tests in the graphs (`Attention` with one token) are constants at T = 96.
+        warnings.simplefilter("ignore", torch.jit.TracerWarning)
         torch.onnx.export(module, args, str(path), opset_version=OPSET, dynamo=False,
                           input_names=input_names, output_names=output_names, do_constant_folding=True)
         outputs = module(*args)
@@ -61,6 +65,15 @@ def export_one(module: torch.nn.Module, inputs: dict, input_names: list, output_
     }
 
 
+def fusion_networks(fusion: Fusion) -> list:
+    """The fusion network's graphs as (manifest name, module, input names, output names): the
+    fusion itself and its every-observer-masked form (`FusionEgoOnly`, same weights)."""
+    return [
+        ("fusion", fusion, ["ego", "egonet", "exo", "observer_mask"], ["root_6d", "body_6d"]),
+        ("fusion_ego_only", FusionEgoOnly(fusion), ["ego", "egonet"], ["root_6d", "body_6d"]),
+    ]
+
+
 def export_model_set(egonet: EgoNet, gate: Gate, fusion: Fusion, points: int, max_observers: int, hidden: int,
                      out_dir: Path, prefix: str, seed: int = 0):
     """Exports one tracking mode's networks into ``out_dir/prefix``; returns (manifest entry,
@@ -71,8 +84,7 @@ def export_model_set(egonet: EgoNet, gate: Gate, fusion: Fusion, points: int, ma
     for name, module, ins, outs in [
         ("egonet", egonet, ["ego"], ["root_6d", "body_6d"]),
         ("gate", gate, ["gate_features"], ["gate"]),
-        ("fusion", fusion, ["ego", "egonet", "exo", "observer_mask"], ["root_6d", "body_6d"]),
-    ]:
+    ] + fusion_networks(fusion):
         rel = f"{prefix}/{name}.onnx"
         entry = export_one(module, inputs, ins, outs, out_dir / rel)
         references[name] = entry.pop("_reference")

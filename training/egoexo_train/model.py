@@ -163,15 +163,27 @@ class Attention(nn.Module):
         self.qkv = nn.Linear(dim, 3 * dim)
         self.out = nn.Linear(dim, dim)
 
-    def forward(self, x: torch.Tensor, key_bias: torch.Tensor | None) -> torch.Tensor:
+    def forward(self, x: torch.Tensor, key_bias: torch.Tensor | None, first_query_only: bool = False) -> torch.Tensor:
+        """``x [B,S,D]`` -> ``[B,S,D]``, or ``[B,1,D]`` (the first token's output only) with
+        `first_query_only`. With one token (S = 1) the softmax over one key is exactly 1, so
+        the output is the value's projection and no scores are computed."""
         b, s, d = x.shape
         h = self.heads
-        q, k, v = self.qkv(x).reshape(b, s, 3, h, d // h).permute(2, 0, 3, 1, 4)
+        if s == 1:
+            value = nn.functional.linear(x, self.qkv.weight[2 * d:], self.qkv.bias[2 * d:])
+            return self.out(value)
+        if first_query_only:
+            q = nn.functional.linear(x[:, :1], self.qkv.weight[:d], self.qkv.bias[:d])
+            q = q.reshape(b, 1, h, d // h).transpose(1, 2)
+            k, v = nn.functional.linear(x, self.qkv.weight[d:], self.qkv.bias[d:]).reshape(b, s, 2, h, d // h).permute(
+                2, 0, 3, 1, 4)
+        else:
+            q, k, v = self.qkv(x).reshape(b, s, 3, h, d // h).permute(2, 0, 3, 1, 4)
         scores = torch.matmul(q, k.transpose(-1, -2)) * (1.0 / math.sqrt(d // h))
         if key_bias is not None:
             scores = scores + key_bias[:, None, None, :]
         attn = torch.softmax(scores, dim=-1)
-        return self.out(torch.matmul(attn, v).permute(0, 2, 1, 3).reshape(b, s, d))
+        return self.out(torch.matmul(attn, v).permute(0, 2, 1, 3).reshape(b, q.shape[2], d))
 
 
 class EncoderLayer(nn.Module):
@@ -185,8 +197,13 @@ class EncoderLayer(nn.Module):
         self.ff = mlp(dim, ff, dim)
         self.drop = nn.Dropout(dropout)
 
-    def forward(self, x: torch.Tensor, key_bias: torch.Tensor | None = None) -> torch.Tensor:
-        x = x + self.drop(self.attn(self.norm1(x), key_bias))
+    def forward(self, x: torch.Tensor, key_bias: torch.Tensor | None = None,
+                first_query_only: bool = False) -> torch.Tensor:
+        """``x [B,S,D]`` -> ``[B,S,D]``; with `first_query_only` only the first token's output,
+        ``[B,1,D]``, the same numbers as ``forward(x)[:, :1]`` without computing the others'
+        queries, output projections and feed-forwards."""
+        attended = self.attn(self.norm1(x), key_bias, first_query_only)
+        x = (x[:, :1] if first_query_only else x) + self.drop(attended)
         return x + self.drop(self.ff(self.norm2(x)))
 
 
@@ -250,9 +267,29 @@ class Fusion(nn.Module):
         tokens = torch.cat([ego_tok.unsqueeze(2), exo_tok], dim=2).reshape(b * t, n + 1, -1)
         present = torch.cat([torch.ones_like(observer_mask[..., :1]), observer_mask], dim=-1).reshape(b * t, n + 1)
         key_bias = (1.0 - present) * MASKED
+        # Only the ego token leaves the spatial transformer, so its last layer computes the ego
+        # token's output alone (the same numbers; the exo tokens still serve as keys/values).
+        for i, layer in enumerate(self.spatial):
+            tokens = layer(tokens, key_bias, first_query_only=i + 1 == len(self.spatial))
+        return self.temporal_readout(tokens[:, 0].reshape(b, t, -1), egonet)
+
+    def ego_only(self, ego, egonet):
+        """`forward` with every observer masked, without the observers: ``ego [B,T,62]``,
+        ``egonet [B,T,132]`` -> ``root_6d``, ``body_6d``. A masked observer's key carries the
+        bias `MASKED`, whose softmax weight underflows to exactly 0 in float32, so the ego token
+        attends to itself alone; the spatial transformer then runs on the ego token by itself
+        (`Attention` with one token) — the same numbers up to rounding, for a fraction of the
+        work."""
+        b, t, _ = ego.shape
+        tokens = (self.ego_token(torch.cat([ego, egonet], dim=-1)) + self.token_type[0]).reshape(b * t, 1, -1)
         for layer in self.spatial:
-            tokens = layer(tokens, key_bias)
-        x = tokens[:, 0].reshape(b, t, -1) + self.temporal_positions
+            tokens = layer(tokens)
+        return self.temporal_readout(tokens.reshape(b, t, -1), egonet)
+
+    def temporal_readout(self, x, egonet):
+        """The ego tokens after the spatial transformer ``[B,T,hidden]`` -> temporal
+        transformer -> root and body 6D (residuals on EgoNet's, optionally low-passed)."""
+        x = x + self.temporal_positions
         for layer in self.temporal:
             x = layer(x)
         x = self.norm(x)
@@ -261,3 +298,16 @@ class Fusion(nn.Module):
         if self.output_smoothing > 0:
             root, body = self.smoothing @ root, self.smoothing @ body
         return root, body
+
+
+class FusionEgoOnly(nn.Module):
+    """The fusion network with every observer masked as its own graph (`Fusion.ego_only`):
+    ``ego``, ``egonet`` -> ``root_6d``, ``body_6d``; what the engine runs for the ego-only
+    method and for live sessions without observers."""
+
+    def __init__(self, fusion: Fusion):
+        super().__init__()
+        self.fusion = fusion
+
+    def forward(self, ego, egonet):
+        return self.fusion.ego_only(ego, egonet)

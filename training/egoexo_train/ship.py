@@ -20,7 +20,7 @@ from pathlib import Path
 
 import torch
 
-from .export import WINDOW, export_model_set, export_one, example_inputs
+from .export import WINDOW, example_inputs, export_model_set, export_one, fusion_networks
 from .model import EgoNet, Fusion, Gate
 
 
@@ -76,10 +76,9 @@ def ship_live(state: dict, config: dict, out: Path):
     gate, fusion = build_gate_fusion(state, config)
     inputs = example_inputs(config["max_observers"], torch.Generator().manual_seed(0))
     prefix = f"{points}pt-live{lookahead}"
-    entry = {k: v for k, v in offline.items() if k not in ("gate", "fusion")}
+    entry = {k: v for k, v in offline.items() if k not in ("gate", "fusion", "fusion_ego_only")}
     entry.update({"lookahead": lookahead, "hidden_dim": config["hidden"]})
-    for name, module, ins, outs in [("gate", gate, ["gate_features"], ["gate"]),
-                                    ("fusion", fusion, ["ego", "egonet", "exo", "observer_mask"], ["root_6d", "body_6d"])]:
+    for name, module, ins, outs in [("gate", gate, ["gate_features"], ["gate"])] + fusion_networks(fusion):
         rel = f"{prefix}/{name}.onnx"
         exported = export_one(module, inputs, ins, outs, out / rel)
         exported.pop("_reference", None)

@@ -28,7 +28,7 @@ def test_onnxruntime_matches_pytorch_within_1e_4():
     index, array = reference()
     manifest = json.loads((FIXTURE / "manifest.json").read_text())
     model_set = next(s for s in manifest["model_sets"] if s["tracking"] == index["tracking"])
-    for name in ("egonet", "gate", "fusion"):
+    for name in ("egonet", "gate", "fusion", "fusion_ego_only"):
         session = onnxruntime.InferenceSession(str(FIXTURE / model_set[name]["file"]))
         inputs = {i.name: array(f"{name}/input/{i.name}") for i in session.get_inputs()}
         outputs = session.run(None, inputs)
@@ -44,7 +44,7 @@ def test_manifest_checksums_match_the_files():
 
     manifest = json.loads((FIXTURE / "manifest.json").read_text())
     for model_set in manifest["model_sets"]:
-        for name in ("egonet", "gate", "fusion"):
+        for name in ("egonet", "gate", "fusion", "fusion_ego_only"):
             entry = model_set[name]
             data = (FIXTURE / entry["file"]).read_bytes()
             assert hashlib.sha256(data).hexdigest() == entry["sha256"]

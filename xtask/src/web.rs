@@ -286,7 +286,11 @@ fn model_files(manifest: &[u8]) -> Result<Vec<String>> {
     let sets = value["model_sets"].as_array().context("no `model_sets` array")?;
     let mut files = Vec::new();
     for set in sets {
-        for network in ["egonet", "gate", "fusion"] {
+        // `fusion_ego_only` is optional (sets exported before it have none).
+        for network in ["egonet", "gate", "fusion", "fusion_ego_only"] {
+            if network == "fusion_ego_only" && set.get(network).is_none() {
+                continue;
+            }
             let file = set[network]["file"].as_str().with_context(|| format!("no `{network}.file`"))?;
             if file.starts_with('/') || file.split(['/', '\\']).any(|p| p == "..") {
                 bail!("model file `{file}` leaves the models folder");
@@ -342,11 +346,13 @@ mod tests {
     fn model_files_come_from_every_set_and_stay_inside() {
         let manifest = br#"{"model_sets": [
             {"egonet": {"file": "1pt/egonet.onnx"}, "gate": {"file": "1pt/gate.onnx"}, "fusion": {"file": "1pt/fusion.onnx"}},
-            {"egonet": {"file": "3pt/egonet.onnx"}, "gate": {"file": "3pt/gate.onnx"}, "fusion": {"file": "3pt/fusion.onnx"}}
+            {"egonet": {"file": "3pt/egonet.onnx"}, "gate": {"file": "3pt/gate.onnx"}, "fusion": {"file": "3pt/fusion.onnx"},
+             "fusion_ego_only": {"file": "3pt/fusion_ego_only.onnx"}}
         ]}"#;
         let files = model_files(manifest).unwrap();
-        assert_eq!(files.len(), 6);
+        assert_eq!(files.len(), 7);
         assert_eq!(files[3], "3pt/egonet.onnx");
+        assert_eq!(files[6], "3pt/fusion_ego_only.onnx");
         let escaping =
             br#"{"model_sets": [{"egonet": {"file": "../secret"}, "gate": {"file": "g"}, "fusion": {"file": "f"}}]}"#;
         assert!(model_files(escaping).unwrap_err().to_string().contains("leaves the models folder"));

@@ -164,7 +164,7 @@ fn simulate_inspect_reconstruct_and_evaluate() {
     let live_models = dir.join("live-models");
     for sub in ["1pt", "3pt"] {
         std::fs::create_dir_all(live_models.join(sub)).unwrap();
-        for file in ["egonet.onnx", "gate.onnx", "fusion.onnx"] {
+        for file in ["egonet.onnx", "gate.onnx", "fusion.onnx", "fusion_ego_only.onnx"] {
             std::fs::copy(Path::new(&models).join(sub).join(file), live_models.join(sub).join(file)).unwrap();
         }
     }

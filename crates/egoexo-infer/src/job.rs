@@ -16,7 +16,7 @@ use egoexo_core::aligned::AlignedSession;
 use crate::InferError;
 use crate::decode::{MotionAssembler, assemble_reconstruction};
 use crate::engine::{CoarsePose, Engine, Method, Progress, ReconstructOptions, Reconstruction, Stage};
-use crate::passes::{EgoPassOutput, WindowOutput, ego_pass, exo_pass, fusion_pass};
+use crate::passes::{EgoPassOutput, WindowOutput, ego_pass, observer_fusion_pass};
 use crate::plan::{ReconstructionPlan, resolve_tracking};
 use crate::timing::{Clock, StageTimer, StageTimings, TimedStage};
 
@@ -157,8 +157,7 @@ impl ReconstructionJob {
                 None => WindowOutput::from_coarse(ego),
                 Some(mode) => {
                     let models = engine.require_models(tracking)?;
-                    let exo = exo_pass(aligned, models, ego, &self.plan.observers, mode, timer)?;
-                    fusion_pass(models, ego, &exo, timer)?
+                    observer_fusion_pass(aligned, models, ego, &self.plan.observers, mode, timer)?
                 }
             };
             let assembler = &mut self.assemblers[self.pass - 1];
@@ -210,9 +209,8 @@ impl ReconstructionJob {
                         None => Ok(WindowOutput::from_coarse(ego)),
                         Some(mode) => {
                             let models = engine.require_models(tracking)?;
-                            let exo =
-                                exo_pass(aligned, models, ego, &self.plan.observers, mode, &mut StageTimer::off())?;
-                            fusion_pass(models, ego, &exo, &mut StageTimer::off())
+                            let observers = &self.plan.observers;
+                            observer_fusion_pass(aligned, models, ego, observers, mode, &mut StageTimer::off())
                         }
                     })
                     .collect::<Result<_, _>>()?;

@@ -36,18 +36,25 @@ pub struct ModelFile {
     pub outputs: Vec<TensorSpec>,
 }
 
-/// The networks of a model set, by the names benches and tools use.
-pub const NETWORK_NAMES: [&str; 3] = ["egonet", "gate", "fusion"];
+/// The networks of a model set, by the names benches and tools use (`fusion_ego_only` is
+/// optional: sets exported before it existed run the fusion with every observer masked).
+pub const NETWORK_NAMES: [&str; 4] = ["egonet", "gate", "fusion", "fusion_ego_only"];
 
 impl ModelSetManifest {
-    /// The file of network `name` (one of [`NETWORK_NAMES`]).
+    /// The file of network `name` (one of [`NETWORK_NAMES`]), if the set has it.
     pub fn network(&self, name: &str) -> Option<&ModelFile> {
         match name {
             "egonet" => Some(&self.egonet),
             "gate" => Some(&self.gate),
             "fusion" => Some(&self.fusion),
+            "fusion_ego_only" => self.fusion_ego_only.as_ref(),
             _ => None,
         }
+    }
+
+    /// The set's network files, in [`NETWORK_NAMES`] order.
+    pub fn network_files(&self) -> impl Iterator<Item = &ModelFile> {
+        [Some(&self.egonet), Some(&self.gate), Some(&self.fusion), self.fusion_ego_only.as_ref()].into_iter().flatten()
     }
 }
 
@@ -93,6 +100,11 @@ pub struct ModelSetManifest {
     pub egonet: ModelFile,
     pub gate: ModelFile,
     pub fusion: ModelFile,
+    /// The fusion with every observer masked as its own graph (inputs `ego`, `egonet`; the
+    /// same weights and numbers), which the ego-only method runs instead of the fusion on empty
+    /// observer slots. Absent in sets exported before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fusion_ego_only: Option<ModelFile>,
 }
 
 /// The whole manifest.
@@ -185,7 +197,7 @@ impl Manifest {
                 )));
             }
         }
-        let files: Vec<&ModelFile> = self.model_sets.iter().flat_map(|s| [&s.egonet, &s.gate, &s.fusion]).collect();
+        let files: Vec<&ModelFile> = self.model_sets.iter().flat_map(ModelSetManifest::network_files).collect();
         for (i, file) in files.iter().enumerate() {
             if files[..i].iter().any(|f| f.file == file.file && f.sha256 != file.sha256) {
                 return Err(InferError::Manifest(format!(
@@ -210,7 +222,7 @@ impl Manifest {
     /// Every file of every set once (live variants share the offline EgoNet), in set order.
     pub fn files(&self) -> Vec<&ModelFile> {
         let mut files: Vec<&ModelFile> = Vec::new();
-        for file in self.model_sets.iter().flat_map(|set| [&set.egonet, &set.gate, &set.fusion]) {
+        for file in self.model_sets.iter().flat_map(ModelSetManifest::network_files) {
             if !files.iter().any(|f| f.file == file.file) {
                 files.push(file);
             }

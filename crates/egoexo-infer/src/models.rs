@@ -78,13 +78,16 @@ impl OnnxModel {
     }
 }
 
-/// The three networks of one tracking mode.
+/// The networks of one tracking mode.
 #[derive(Clone, Debug)]
 pub struct ModelSet {
     pub manifest: ModelSetManifest,
     pub egonet: OnnxModel,
     pub gate: OnnxModel,
     pub fusion: OnnxModel,
+    /// The fusion with every observer masked, when the set ships it
+    /// ([`ModelSetManifest::fusion_ego_only`]).
+    pub fusion_ego_only: Option<OnnxModel>,
 }
 
 /// How often each network has run (one run = one window).
@@ -93,13 +96,20 @@ pub struct NetworkRuns {
     pub egonet: u64,
     pub gate: u64,
     pub fusion: u64,
+    #[serde(default)]
+    pub fusion_ego_only: u64,
 }
 
 impl Add for NetworkRuns {
     type Output = NetworkRuns;
 
     fn add(self, o: NetworkRuns) -> NetworkRuns {
-        NetworkRuns { egonet: self.egonet + o.egonet, gate: self.gate + o.gate, fusion: self.fusion + o.fusion }
+        NetworkRuns {
+            egonet: self.egonet + o.egonet,
+            gate: self.gate + o.gate,
+            fusion: self.fusion + o.fusion,
+            fusion_ego_only: self.fusion_ego_only + o.fusion_ego_only,
+        }
     }
 }
 
@@ -112,14 +122,20 @@ impl Sub for NetworkRuns {
             egonet: self.egonet.saturating_sub(o.egonet),
             gate: self.gate.saturating_sub(o.gate),
             fusion: self.fusion.saturating_sub(o.fusion),
+            fusion_ego_only: self.fusion_ego_only.saturating_sub(o.fusion_ego_only),
         }
     }
 }
 
 impl ModelSet {
-    /// How often each of the three networks has run.
+    /// How often each network has run.
     pub fn runs(&self) -> NetworkRuns {
-        NetworkRuns { egonet: self.egonet.runs(), gate: self.gate.runs(), fusion: self.fusion.runs() }
+        NetworkRuns {
+            egonet: self.egonet.runs(),
+            gate: self.gate.runs(),
+            fusion: self.fusion.runs(),
+            fusion_ego_only: self.fusion_ego_only.as_ref().map_or(0, OnnxModel::runs),
+        }
     }
 
     /// Loads a model set, reading each file through `read` (a path relative to the models
@@ -160,6 +176,7 @@ impl ModelSet {
             egonet: load(&manifest.egonet)?,
             gate: load(&manifest.gate)?,
             fusion: load(&manifest.fusion)?,
+            fusion_ego_only: manifest.fusion_ego_only.as_ref().map(&mut load).transpose()?,
             manifest: manifest.clone(),
         })
     }

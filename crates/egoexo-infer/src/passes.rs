@@ -6,6 +6,10 @@
 //!              coarse pose)  coarse 6D)      gate values)             gates per slot)
 //! ```
 //!
+//! [`observer_fusion_pass`] is the exo and fusion passes of one method; for the ego-only
+//! method it runs [`fusion_ego_only_pass`] instead when the model set ships that graph (the
+//! fusion with every observer masked, without building empty observer slots).
+//!
 //! Each pass reads the aligned session only at the window's frames (and one frame of history
 //! for the ego features), so a caller may feed windows one at a time as they complete — the
 //! batch [`crate::ReconstructionJob`] and, later, a live stream use the same passes. The ego
@@ -198,6 +202,47 @@ impl WindowOutput {
             gates: None,
         }
     }
+}
+
+/// The ego-only fusion pass: the fusion network with every observer masked, as its own graph
+/// (`fusion_ego_only`: the same weights; a masked observer's attention weight is exactly 0
+/// in float32, so the same numbers up to rounding) — what [`fusion_pass`] computes on
+/// [`exo_pass`]`(.., ExoMode::Masked, ..)`, without the empty observer slots. `None` when the
+/// set does not ship the graph.
+pub fn fusion_ego_only_pass(
+    models: &ModelSet,
+    ego: &EgoPassOutput,
+    timer: &mut StageTimer<'_>,
+) -> Option<Result<WindowOutput, InferError>> {
+    let model = models.fusion_ego_only.as_ref()?;
+    let output = timer.time(TimedStage::Fusion, || model.run(&[&ego.window.ego, &ego.coarse])).and_then(|out| {
+        Ok(WindowOutput {
+            plan: ego.window.plan.clone(),
+            r_world_window: ego.window.t_world_window.rotation,
+            poses: concat_pose(model.name(), &out)?,
+            gates: None,
+        })
+    });
+    Some(output)
+}
+
+/// One method's passes after the shared ego pass: [`exo_pass`] then [`fusion_pass`], or, for
+/// [`ExoMode::Masked`] with a set that ships it, [`fusion_ego_only_pass`].
+pub fn observer_fusion_pass(
+    aligned: &AlignedSession,
+    models: &ModelSet,
+    ego: &EgoPassOutput,
+    observers: &[usize],
+    mode: ExoMode,
+    timer: &mut StageTimer<'_>,
+) -> Result<WindowOutput, InferError> {
+    if mode == ExoMode::Masked
+        && let Some(output) = fusion_ego_only_pass(models, ego, timer)
+    {
+        return output;
+    }
+    let exo = exo_pass(aligned, models, ego, observers, mode, timer)?;
+    fusion_pass(models, ego, &exo, timer)
 }
 
 /// Fusion pass: the spatial–temporal transformer over the ego stream, the coarse pose and

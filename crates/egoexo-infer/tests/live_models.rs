@@ -35,7 +35,7 @@ fn live_sets_are_chosen_by_lookahead_and_files_are_read_once() {
         None,
         "the offline set, not the variant"
     );
-    assert_eq!(manifest.files().len(), 6, "the live set's files are the offline ones");
+    assert_eq!(manifest.files().len(), 8, "the live set's files are the offline ones");
 
     let dir = fixture_dir();
     let mut reads: BTreeMap<String, usize> = BTreeMap::new();
@@ -44,7 +44,7 @@ fn live_sets_are_chosen_by_lookahead_and_files_are_read_once() {
         std::fs::read(dir.join(file)).map_err(|e| InferError::ReadModel { file: file.into(), message: e.to_string() })
     })
     .unwrap();
-    assert_eq!(reads.len(), 6);
+    assert_eq!(reads.len(), 8);
     assert!(reads.values().all(|&n| n == 1), "{reads:?}");
 
     let (three, one) = (TrackingMode::ThreePoint, TrackingMode::OnePoint);
@@ -67,6 +67,7 @@ fn the_engine_for_a_lookahead_runs_the_variants_own_networks_and_shares_egonet()
     let variant = manifest["model_sets"].as_array_mut().unwrap().last_mut().unwrap();
     variant["gate"] = one_point["gate"].clone();
     variant["fusion"] = one_point["fusion"].clone();
+    variant["fusion_ego_only"] = one_point["fusion_ego_only"].clone();
     let manifest = parse(&manifest).unwrap();
     let dir = fixture_dir();
     let models = LoadedModels::load(&manifest, |file| {

@@ -44,6 +44,12 @@ fn tract_matches_pytorch_and_onnxruntime_within_1e_4() {
         ("egonet", &models.egonet, vec!["ego"], vec!["root_6d", "body_6d"]),
         ("gate", &models.gate, vec!["gate_features"], vec!["gate"]),
         ("fusion", &models.fusion, vec!["ego", "egonet", "exo", "observer_mask"], vec!["root_6d", "body_6d"]),
+        (
+            "fusion_ego_only",
+            models.fusion_ego_only.as_ref().unwrap(),
+            vec!["ego", "egonet"],
+            vec!["root_6d", "body_6d"],
+        ),
     ] {
         let args: Vec<&[f32]> = inputs.iter().map(|i| reference.array(&format!("{name}/input/{i}"))).collect();
         let got = model.run(&args).unwrap();

@@ -22,9 +22,11 @@ fn file(name: &str) -> Result<Vec<u8>, InferError> {
         "1pt/egonet.onnx" => include_bytes!("fixtures/models/1pt/egonet.onnx").to_vec(),
         "1pt/gate.onnx" => include_bytes!("fixtures/models/1pt/gate.onnx").to_vec(),
         "1pt/fusion.onnx" => include_bytes!("fixtures/models/1pt/fusion.onnx").to_vec(),
+        "1pt/fusion_ego_only.onnx" => include_bytes!("fixtures/models/1pt/fusion_ego_only.onnx").to_vec(),
         "3pt/egonet.onnx" => include_bytes!("fixtures/models/3pt/egonet.onnx").to_vec(),
         "3pt/gate.onnx" => include_bytes!("fixtures/models/3pt/gate.onnx").to_vec(),
         "3pt/fusion.onnx" => include_bytes!("fixtures/models/3pt/fusion.onnx").to_vec(),
+        "3pt/fusion_ego_only.onnx" => include_bytes!("fixtures/models/3pt/fusion_ego_only.onnx").to_vec(),
         other => return Err(InferError::ReadModel { file: other.into(), message: "not in the fixture".into() }),
     })
 }
@@ -49,6 +51,7 @@ fn tract_in_the_browser_matches_pytorch_and_onnxruntime() {
         ("egonet", &set.egonet, vec!["ego"], vec!["root_6d", "body_6d"]),
         ("gate", &set.gate, vec!["gate_features"], vec!["gate"]),
         ("fusion", &set.fusion, vec!["ego", "egonet", "exo", "observer_mask"], vec!["root_6d", "body_6d"]),
+        ("fusion_ego_only", set.fusion_ego_only.as_ref().unwrap(), vec!["ego", "egonet"], vec!["root_6d", "body_6d"]),
     ] {
         let args: Vec<&[f32]> = inputs.iter().map(|i| array(&format!("{name}/input/{i}"))).collect();
         let got = model.run(&args).unwrap();

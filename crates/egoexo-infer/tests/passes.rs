@@ -34,8 +34,10 @@ fn ego_exo_and_the_ego_only_overlay_share_one_ego_pass() {
     let runs = engine.network_runs() - before;
     let windows = stages.iter().filter(|s| **s == Stage::Ego).count();
     assert!(windows >= 4, "{windows} windows");
-    // EgoNet once per window; the gate only for ego-exo; fusion once per window and method.
-    assert_eq!(runs, NetworkRuns { egonet: windows as u64, gate: windows as u64, fusion: 2 * windows as u64 });
+    // EgoNet once per window; the gate only for ego-exo; the fusion once per window for
+    // ego-exo, its every-observer-masked graph once per window for the overlay.
+    let w = windows as u64;
+    assert_eq!(runs, NetworkRuns { egonet: w, gate: w, fusion: w, fusion_ego_only: w });
     let mut order = stages.clone();
     order.dedup();
     assert_eq!(order, [Stage::Ego, Stage::Fusion(Method::EgoExo), Stage::Fusion(Method::EgoOnly)]);
@@ -47,6 +49,39 @@ fn ego_exo_and_the_ego_only_overlay_share_one_ego_pass() {
     }
     let separately = engine.network_runs() - before - runs;
     assert_eq!(separately.egonet, 2 * windows as u64);
+}
+
+/// The ego-only method runs the fusion's every-observer-masked graph when the set ships it;
+/// it reconstructs what the fusion on empty observer slots does (a set without the graph).
+#[test]
+fn the_ego_only_graph_reconstructs_what_the_fusion_does_with_every_observer_masked() {
+    let aligned = aligned_session(9.0, 2, TrackingMode::ThreePoint, 12);
+    let options = ReconstructOptions { method: Method::EgoOnly, ..ReconstructOptions::default() };
+    let with_graph = engine();
+    let mut without = fixture_models(TrackingMode::ThreePoint);
+    assert!(without.fusion_ego_only.is_some(), "the fixture set ships fusion_ego_only");
+    without.fusion_ego_only = None;
+    let without_graph = Engine::new().with_models(without);
+
+    let before = (with_graph.network_runs(), without_graph.network_runs());
+    let a = with_graph.reconstruct(&aligned, &options, &mut |_| true).unwrap();
+    let b = without_graph.reconstruct(&aligned, &options, &mut |_| true).unwrap();
+    let (runs_a, runs_b) = (with_graph.network_runs() - before.0, without_graph.network_runs() - before.1);
+    assert!(runs_a.fusion_ego_only > 0 && runs_a.fusion == 0 && runs_a.gate == 0, "{runs_a:?}");
+    assert!(runs_b.fusion_ego_only == 0 && runs_b.fusion == runs_a.fusion_ego_only, "{runs_b:?}");
+
+    assert_eq!(a.joints.len(), b.joints.len());
+    let mut max_diff = 0.0f32;
+    for (fa, fb) in a.joints.iter().zip(&b.joints) {
+        for (ja, jb) in fa.iter().zip(fb) {
+            max_diff = max_diff.max((*ja - *jb).abs().max_element());
+        }
+    }
+    assert!(max_diff < 1e-4, "joints differ by {max_diff} m");
+    // ...while the observers, when used, move the joints (so the comparison can fail).
+    let ego_exo = with_graph.reconstruct(&aligned, &ReconstructOptions::default(), &mut |_| true).unwrap();
+    let moved = ego_exo.joints.iter().zip(&a.joints).map(|(e, o)| (e[20] - o[20]).length()).fold(0.0, f32::max);
+    assert!(moved > 1e-3, "ego-exo and ego-only agree to {moved} m");
 }
 
 #[test]
@@ -66,11 +101,12 @@ fn a_timed_job_times_every_engine_stage_per_window_and_gives_the_untimed_result(
     while job.step_timed(&engine, &aligned, &mut clock).unwrap().is_some() {}
     let (timed, timings) = job.finish_timed(&aligned, &mut clock).unwrap();
     let calls = |stage| timings.stages.iter().find(|s| s.stage == stage).map(|s| s.calls);
-    // Ego features and EgoNet once per window (shared); rays for both methods (masked for
-    // ego-only), the gate only for ego-exo; fusion and decode once per window and method.
+    // Ego features and EgoNet once per window (shared); rays and the gate only for ego-exo
+    // (ego-only runs the fusion's every-observer-masked graph); fusion and decode once per
+    // window and method.
     assert_eq!(calls(TimedStage::EgoFeatures), Some(windows));
     assert_eq!(calls(TimedStage::EgoNet), Some(windows));
-    assert_eq!(calls(TimedStage::ExoFeatures), Some(2 * windows));
+    assert_eq!(calls(TimedStage::ExoFeatures), Some(windows));
     assert_eq!(calls(TimedStage::Gate), Some(windows));
     assert_eq!(calls(TimedStage::Fusion), Some(2 * windows));
     assert_eq!(calls(TimedStage::Decode), Some(2 * windows));

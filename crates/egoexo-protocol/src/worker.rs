@@ -574,6 +574,10 @@ pub struct NetworkRuns {
     pub egonet: u64,
     pub gate: u64,
     pub fusion: u64,
+    /// Runs of the fusion with every observer masked as its own graph (the ego-only overlay
+    /// when the models ship it; added within version 3, 0 from a peer that does not send it).
+    #[serde(default)]
+    pub fusion_ego_only: u64,
 }
 
 /// A finished reconstruction.

@@ -23,7 +23,7 @@ pub struct NetworkBench {
 }
 
 impl NetworkBench {
-    /// Loads and optimises `network` (`egonet`, `gate` or `fusion`) of the offline
+    /// Loads and optimises `network` (one of [`NETWORK_NAMES`]) of the offline
     /// `points`-point set of `manifest_json` from its file's `bytes` (sha256-checked).
     pub fn load(manifest_json: &[u8], points: u8, network: &str, bytes: Vec<u8>) -> Result<Self, WorkerError> {
         let manifest = Manifest::from_json(manifest_json).map_err(WorkerError::Models)?;
@@ -194,7 +194,7 @@ mod tests {
 
     #[test]
     fn a_network_runs_the_same_inputs_to_the_same_outputs_and_knows_its_cost() {
-        for network in ["egonet", "gate", "fusion"] {
+        for network in NETWORK_NAMES {
             let mut bench = load(network).unwrap();
             let out = bench.run().unwrap();
             let expected: usize = bench.file().outputs.iter().map(|o| o.shape.iter().product::<usize>()).sum();
@@ -212,7 +212,7 @@ mod tests {
     #[test]
     fn a_wrong_network_or_file_is_refused_by_name() {
         let err = load("decoder").unwrap_err().to_string();
-        assert!(err.contains("decoder") && err.contains("egonet, gate, fusion"), "{err}");
+        assert!(err.contains("decoder") && err.contains("egonet, gate, fusion, fusion_ego_only"), "{err}");
         let manifest = std::fs::read(fixtures().join("manifest.json")).unwrap();
         let err = NetworkBench::load(&manifest, 3, "gate", b"not onnx".to_vec()).unwrap_err().to_string();
         assert!(err.contains("sha256"), "{err}");

@@ -637,7 +637,12 @@ fn reconstruction_summary(
         frames: ego_exo.joints.len(),
         valid_frames: ego_exo.valid.iter().filter(|&&v| v).count(),
         windows,
-        network_runs: protocol::NetworkRuns { egonet: runs.egonet, gate: runs.gate, fusion: runs.fusion },
+        network_runs: protocol::NetworkRuns {
+            egonet: runs.egonet,
+            gate: runs.gate,
+            fusion: runs.fusion,
+            fusion_ego_only: runs.fusion_ego_only,
+        },
         exo_evidence_frames: ego_exo.exo_evidence.iter().filter(|&&v| v).count(),
         observer_ray_frames: observers_used.into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
         accuracy,

@@ -173,7 +173,7 @@ fn a_live_variant_for_the_lookahead_reads_the_frames_out_and_other_lookaheads_us
     sets.push(live_set);
     let manifest = manifest.to_string();
     let worker = worker_with(manifest.as_bytes());
-    assert_eq!(SessionWorker::model_files(manifest.as_bytes()).unwrap().len(), 6, "shared files listed once");
+    assert_eq!(SessionWorker::model_files(manifest.as_bytes()).unwrap().len(), 8, "shared files listed once");
     let session = session();
     let (messages, frames) = as_relay(&session, true);
     for (lookahead, trained) in [(2, true), (3, false)] {

@@ -73,7 +73,8 @@ fn reconstructs_the_fixture_like_the_native_engine() {
     // EgoNet once per window: the overlay reuses the ego pass.
     let windows = summary.windows as u64;
     assert_eq!(summary.network_runs.egonet, windows);
-    assert_eq!(summary.network_runs.fusion, 2 * windows);
+    assert_eq!(summary.network_runs.fusion, windows);
+    assert_eq!(summary.network_runs.fusion_ego_only, windows);
     assert_eq!(summary.valid_frames, expected.valid_frames);
 
     // Joints: the same as natively, within float-kernel differences.

@@ -18,13 +18,15 @@ macro_rules! model_file {
 /// The untrained fixture networks of `egoexo-infer` (same format as the shipped `models/`).
 pub const MANIFEST: &[u8] =
     include_bytes!(concat!(env!("CARGO_MANIFEST_DIR"), "/../egoexo-infer/tests/fixtures/models/manifest.json"));
-pub const MODEL_FILES: [(&str, &[u8]); 6] = [
+pub const MODEL_FILES: [(&str, &[u8]); 8] = [
     model_file!("1pt/egonet.onnx"),
     model_file!("1pt/gate.onnx"),
     model_file!("1pt/fusion.onnx"),
+    model_file!("1pt/fusion_ego_only.onnx"),
     model_file!("3pt/egonet.onnx"),
     model_file!("3pt/gate.onnx"),
     model_file!("3pt/fusion.onnx"),
+    model_file!("3pt/fusion_ego_only.onnx"),
 ];
 
 pub fn model_file(name: &str) -> Option<&'static [u8]> {

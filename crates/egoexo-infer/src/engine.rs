@@ -328,7 +328,7 @@ impl Engine {
         progress: &mut dyn FnMut(Progress) -> bool,
     ) -> Result<Vec<Reconstruction>, InferError> {
         self.run_jobs(aligned, options, methods, &mut |engine, job| {
-            job.run_in_parallel(engine, aligned, crate::job::PARALLEL_CHUNK, progress)
+            job.run_in_parallel(engine, aligned, crate::job::WINDOW_CHUNK, progress)
         })
     }
 

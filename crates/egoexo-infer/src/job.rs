@@ -8,8 +8,11 @@
 //! methods that share a coarse-pose source (ego-exo and the ego-only overlay) share one ego
 //! pass: EgoNet runs once per window per job.
 //!
-//! Steps, in order: the ego pass over every window, then for each method its exo and fusion
-//! passes over every window (for a baseline, its coarse pose decoded).
+//! Steps, in order, chunk by chunk of [`WINDOW_CHUNK`] windows: the ego pass over the chunk's
+//! windows, then for each method its exo and fusion passes over them (for a baseline, its
+//! coarse pose decoded). Only a chunk's ego outputs are held at once, so an hour-long session
+//! (~2,300 windows) never holds every window's features and coarse pose; a session of up to a
+//! chunk runs pass by pass.
 
 use egoexo_core::aligned::AlignedSession;
 
@@ -20,11 +23,11 @@ use crate::passes::{EgoPassOutput, WindowOutput, ego_pass, observer_fusion_pass}
 use crate::plan::{ReconstructionPlan, resolve_tracking};
 use crate::timing::{Clock, StageTimer, StageTimings, TimedStage};
 
-/// Windows per chunk of [`ReconstructionJob::run_in_parallel`]: enough to keep a few cores
-/// busy, few enough that a chunk's outputs stay small (an hour-long session has ~2,300
-/// windows).
-#[cfg(feature = "parallel")]
-pub const PARALLEL_CHUNK: usize = 64;
+/// Windows per chunk of a job (sequential steps and [`ReconstructionJob::run_in_parallel`]):
+/// enough to keep a few cores busy, few enough that a chunk's outputs stay small (an
+/// hour-long session has ~2,300 windows; a chunk is ~100 s of a session at the default
+/// stride).
+pub const WINDOW_CHUNK: usize = 64;
 
 /// One reconstruction of one session with one or more methods (see the module docs).
 #[derive(Clone, Debug)]
@@ -32,14 +35,20 @@ pub struct ReconstructionJob {
     plan: ReconstructionPlan,
     methods: Vec<Method>,
     coarse: CoarsePose,
-    /// The ego pass's output per window (filled by the first pass).
+    /// The ego pass's output per window of the current chunk.
     ego: Vec<EgoPassOutput>,
     /// One per method.
     assemblers: Vec<MotionAssembler>,
-    /// 0: the ego pass; `1 + m`: method `m`'s passes.
+    /// Windows per chunk.
+    chunk: usize,
+    /// First window of the current chunk.
+    chunk_start: usize,
+    /// 0: the ego pass; `1 + m`: method `m`'s passes (within the current chunk).
     pass: usize,
-    /// Next window of the current pass.
+    /// Next window of the current pass, counted from the chunk's start.
     window: usize,
+    /// Steps run.
+    steps: usize,
     /// The floor the feet are kept above, when the options ask and the session knows it.
     floor_y: Option<f32>,
     /// Time per stage of the steps run with a clock ([`Self::step_timed`]).
@@ -72,13 +81,16 @@ impl ReconstructionJob {
         let assemblers =
             methods.iter().map(|_| MotionAssembler::new(aligned.observers.len(), plan.crossfade_ramp)).collect();
         Ok(Self {
-            ego: Vec::with_capacity(plan.windows.len()),
+            ego: Vec::with_capacity(WINDOW_CHUNK.min(plan.windows.len())),
             plan,
             methods: methods.to_vec(),
             coarse,
             assemblers,
+            chunk: WINDOW_CHUNK,
+            chunk_start: 0,
             pass: 0,
             window: 0,
+            steps: 0,
             floor_y: aligned.floor_y.filter(|y| options.floor_contact && y.is_finite()),
             timings: StageTimings::default(),
         })
@@ -101,10 +113,27 @@ impl ReconstructionJob {
 
     /// Steps done so far.
     pub fn done_steps(&self) -> usize {
-        self.pass * self.plan.windows.len() + self.window
+        self.steps
     }
 
-    /// Runs the next window of the current pass; `None` when every pass is done. `engine` and
+    /// Sets the windows per chunk (≥ 1; [`WINDOW_CHUNK`] by default) of a job that has not
+    /// started; the result does not depend on it, only the order of the steps and the memory
+    /// held do.
+    pub fn set_chunk(&mut self, windows: usize) -> Result<(), InferError> {
+        if self.steps != 0 {
+            return Err(InferError::Window("a job's chunk is set before its first step".into()));
+        }
+        self.chunk = windows.max(1);
+        Ok(())
+    }
+
+    /// Ego-pass outputs held now (at most a chunk's).
+    pub fn held_ego_passes(&self) -> usize {
+        self.ego.len()
+    }
+
+    /// Runs the next step (one window of one pass of the current chunk); `None` when every
+    /// step has run. `engine` and
     /// `aligned` must be the ones the job was started with.
     pub fn step(&mut self, engine: &Engine, aligned: &AlignedSession) -> Result<Option<Progress>, InferError> {
         self.step_with(engine, aligned, &mut StageTimer::off())
@@ -136,15 +165,12 @@ impl ReconstructionJob {
         timer: &mut StageTimer<'_>,
     ) -> Result<Option<Progress>, InferError> {
         let windows = self.plan.windows.len();
-        if self.window == windows && self.pass <= self.methods.len() {
-            self.pass += 1;
-            self.window = 0;
-        }
-        if self.pass > self.methods.len() || windows == 0 {
+        if self.chunk_start >= windows {
             return Ok(None);
         }
         self.plan.check_session(aligned)?;
-        let i = self.window;
+        let chunk_len = self.chunk.min(windows - self.chunk_start);
+        let i = self.chunk_start + self.window;
         let tracking = self.plan.tracking;
         let stage = if self.pass == 0 {
             let source = engine.coarse_pose_source(self.coarse, tracking)?;
@@ -152,7 +178,7 @@ impl ReconstructionJob {
             Stage::Ego
         } else {
             let method = self.methods[self.pass - 1];
-            let ego = &self.ego[i];
+            let ego = &self.ego[self.window];
             let output = match method.exo_mode() {
                 None => WindowOutput::from_coarse(ego),
                 Some(mode) => {
@@ -162,18 +188,26 @@ impl ReconstructionJob {
             };
             let assembler = &mut self.assemblers[self.pass - 1];
             timer.time(TimedStage::Decode, || assembler.add(&output))?;
-            if self.pass == self.methods.len() && i + 1 == windows {
-                // The last pass is done with the ego outputs.
-                self.ego = Vec::new();
-            }
             Stage::Fusion(method)
         };
+        self.steps += 1;
         self.window += 1;
-        Ok(Some(Progress { stage, done: self.window, total: windows }))
+        if self.window == chunk_len {
+            self.window = 0;
+            self.pass += 1;
+            if self.pass > self.methods.len() {
+                // Every pass of the chunk ran: its ego outputs are done with.
+                self.pass = 0;
+                self.chunk_start += chunk_len;
+                self.ego.clear();
+            }
+        }
+        // The stage's windows run in order, chunk after chunk: windows 0..=i are done.
+        Ok(Some(Progress { stage, done: i + 1, total: windows }))
     }
 
     /// Runs every step of a job that has not started, its windows spread over the current
-    /// rayon pool: chunks of `chunk` windows ([`PARALLEL_CHUNK`] in the engine), each chunk's
+    /// rayon pool: chunks of `chunk` windows ([`WINDOW_CHUNK`] in the engine), each chunk's
     /// ego passes in parallel,
     /// then each method's exo and fusion passes in parallel, decoded in window order — the same
     /// functions and order of decoding as [`Self::step`], so the same result; at most a
@@ -225,8 +259,10 @@ impl ReconstructionJob {
             }
         }
         // Every pass has run: the state `step` leaves at the end.
-        self.pass = self.methods.len();
-        self.window = windows;
+        self.chunk_start = windows;
+        self.pass = 0;
+        self.window = 0;
+        self.steps = self.total_steps();
         self.ego = Vec::new();
         Ok(())
     }

@@ -149,6 +149,44 @@ fn a_job_run_in_parallel_gives_the_sequential_result_chunk_by_chunk() {
     assert_eq!(engine.reconstruct_each_in_parallel(&aligned, &options, &methods, &mut |_| true).unwrap(), sequential);
 }
 
+/// Steps run chunk by chunk: a chunk's ego passes, then each method over the chunk; at most a
+/// chunk's ego outputs are held, and the result is the same whatever the chunk.
+#[test]
+fn a_job_steps_chunk_by_chunk_holding_only_a_chunks_ego_passes() {
+    let aligned = aligned_session(9.0, 2, TrackingMode::ThreePoint, 11);
+    let engine = engine();
+    let options = ReconstructOptions::default();
+    let methods = [Method::EgoExo, Method::EgoOnly];
+    let whole = engine.reconstruct_each(&aligned, &options, &methods, &mut |_| true).unwrap();
+    let mut job = engine.start(&aligned, &options, &methods).unwrap();
+    let windows = job.plan().windows.len();
+    assert!(windows >= 5, "{windows} windows");
+    job.set_chunk(2).unwrap();
+    let (mut stages, mut held) = (Vec::new(), 0);
+    while let Some(p) = job.step(&engine, &aligned).unwrap() {
+        stages.push((p.stage, p.done));
+        held = held.max(job.held_ego_passes());
+        assert!(p.done <= p.total && p.total == windows);
+    }
+    assert_eq!(held, 2, "at most a chunk's ego passes are held");
+    assert_eq!(job.held_ego_passes(), 0);
+    assert_eq!(stages.len(), job.total_steps());
+    assert_eq!(job.done_steps(), job.total_steps());
+    // The first chunk: ego passes of windows 1 and 2, ego-exo over them, then ego-only.
+    let (ego, exo, only) = (Stage::Ego, Stage::Fusion(Method::EgoExo), Stage::Fusion(Method::EgoOnly));
+    assert_eq!(stages[..7], [(ego, 1), (ego, 2), (exo, 1), (exo, 2), (only, 1), (only, 2), (ego, 3)]);
+    // Each stage's windows are done in order.
+    for stage in [ego, exo, only] {
+        let done: Vec<usize> = stages.iter().filter(|(s, _)| *s == stage).map(|(_, d)| *d).collect();
+        assert_eq!(done, (1..=windows).collect::<Vec<_>>(), "{stage:?}");
+    }
+    assert_eq!(job.finish(&aligned).unwrap(), whole);
+    // The chunk is set before the first step only.
+    let mut job = engine.start(&aligned, &options, &methods).unwrap();
+    job.step(&engine, &aligned).unwrap();
+    assert!(job.set_chunk(4).is_err());
+}
+
 #[test]
 fn methods_with_different_coarse_poses_cannot_share_a_job() {
     let aligned = aligned_session(3.0, 1, TrackingMode::OnePoint, 12);

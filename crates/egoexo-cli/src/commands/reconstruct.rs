@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use egoexo_core::TrackingMode;
-use egoexo_infer::job::PARALLEL_CHUNK;
+use egoexo_infer::job::WINDOW_CHUNK;
 use egoexo_infer::plan::resolve_tracking;
 use egoexo_infer::{Engine, Method, Progress, ReconstructOptions, Stage, StageTimer, StageTimings, TimedStage};
 use egoexo_motion_io::{Format, write};
@@ -97,7 +97,7 @@ pub fn run(args: Args) -> Result<()> {
     // Stage timings are per stage of one thread: `--timings` runs the windows in order.
     let (recons, mut timings) = if threads > 1 && args.timings.is_none() {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
-        pool.install(|| job.run_in_parallel(&engine, &aligned, PARALLEL_CHUNK, &mut show))?;
+        pool.install(|| job.run_in_parallel(&engine, &aligned, WINDOW_CHUNK, &mut show))?;
         (job.finish(&aligned)?, StageTimings::default())
     } else {
         while let Some(p) = job.step_timed(&engine, &aligned, &mut clock)? {

@@ -112,11 +112,18 @@ function restartWorker() {
   spawnWorker();
 }
 
+// Performance marks (User Timing) of the page's first load, read by the e2e suite: models
+// ready in the worker, the first session imported, the first skeleton on screen.
+function markOnce(name) {
+  if (performance.getEntriesByName(name, 'mark').length === 0) performance.mark(name);
+}
+
 function onWorkerEvent(event) {
   if (live.onEvent(event)) return;
   switch (event.type) {
     case 'models':
       state.models = event.summary;
+      markOnce('egoexo:models-ready');
       break;
     case 'ready':
     case 'cancelled':
@@ -134,6 +141,7 @@ function onWorkerEvent(event) {
       break;
     }
     case 'imported':
+      markOnce('egoexo:imported');
       state.session = event.summary;
       showSession(event.summary);
       startReconstruction();
@@ -364,6 +372,9 @@ function showScene(scene, summary, how) {
     viewer.set_scene_json(scene);
     state.scene = scene;
     state.summary = summary;
+    // The viewer draws in its next animation frame: the frame after that has the skeleton on
+    // screen. Time to first skeleton = this mark's startTime (from navigation start).
+    requestAnimationFrame(() => requestAnimationFrame(() => markOnce('egoexo:first-skeleton')));
   } catch (error) {
     fail('Cannot show the reconstruction', error.message ?? String(error));
     return;

@@ -3,7 +3,7 @@
 // target/e2e/.
 
 import assert from 'node:assert/strict';
-import { readFileSync } from 'node:fs';
+import { readFileSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
 import { after, before, describe, test } from 'node:test';
 
@@ -344,6 +344,44 @@ describe('bad input and failures', () => {
     try {
       assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
       assert.match(await app.text('#backend'), /renderer: (webgpu|webgl2)/i);
+      assert.deepEqual(app.errors, []);
+    } finally {
+      await app.close();
+    }
+  });
+});
+
+describe('startup', () => {
+  test('time to first skeleton, cold and warm (performance marks; printed and kept in first-skeleton.json)', async () => {
+    // `#sample` opens the sample as the page loads. Cold: a fresh context (empty HTTP cache
+    // and Cache API). Warm: the same page reloaded (wasm from the HTTP cache, models from the
+    // Cache API). Each time is the page's `egoexo:first-skeleton` mark (navigation start → the
+    // frame after the scene was handed to the viewer).
+    const app = await openApp(browser, '?backend=webgl2#sample');
+    const marks = () => app.page.evaluate(() => Object.fromEntries(
+      ['egoexo:models-ready', 'egoexo:imported', 'egoexo:first-skeleton'].map((name) => [
+        name.replace('egoexo:', ''), performance.getEntriesByName(name, 'mark')[0]?.startTime ?? null,
+      ])));
+    const firstSkeleton = async () => {
+      assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
+      await app.page.waitForFunction(() => performance.getEntriesByName('egoexo:first-skeleton', 'mark').length > 0,
+        null, { timeout: 60_000, polling: 50 });
+      return marks();
+    };
+    try {
+      const cold = await firstSkeleton();
+      await app.page.reload();
+      const warm = await firstSkeleton();
+      for (const [name, run] of [['cold', cold], ['warm', warm]]) {
+        for (const [mark, ms] of Object.entries(run)) {
+          assert.ok(Number.isFinite(ms) && ms > 0, `${name} ${mark}: ${ms}`);
+        }
+        assert.ok(run.imported <= run['first-skeleton'], `${name}: ${JSON.stringify(run)}`);
+      }
+      const report = { cold_ms: cold, warm_ms: warm, goal_warm_first_skeleton_ms: 2000 };
+      writeFileSync(join(OUT, 'first-skeleton.json'), `${JSON.stringify(report, null, 1)}\n`);
+      console.log(`time to first skeleton: cold ${cold['first-skeleton'].toFixed(0)} ms, warm ${warm['first-skeleton'].toFixed(0)} ms`
+        + ` (models ready ${cold['models-ready'].toFixed(0)} / ${warm['models-ready'].toFixed(0)} ms)`);
       assert.deepEqual(app.errors, []);
     } finally {
       await app.close();

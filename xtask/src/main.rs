@@ -184,7 +184,7 @@ pub(crate) fn print_network_table(web: Option<&serde_json::Value>, native: &serd
         "networks per 96-frame window (median ms; GFLOP/s achieved / attainable by a plain product of the dominant shape):"
     );
     println!(
-        "  {:<7} {:>8} {:>9} {:>7} {:>9} {:>13} {:>13} {:>8} {:>8} {:>15}",
+        "  {:<15} {:>8} {:>9} {:>7} {:>9} {:>13} {:>13} {:>8} {:>8} {:>15}",
         "network",
         "MFLOP",
         "tract-web",
@@ -200,7 +200,7 @@ pub(crate) fn print_network_table(web: Option<&serde_json::Value>, native: &serd
     let web_rows = web.and_then(|w| w["networks"].as_array()).unwrap_or(&empty);
     let native_rows = native["networks"].as_array().unwrap_or(&empty);
     let null = serde_json::Value::Null;
-    for name in ["egonet", "gate", "fusion"] {
+    for name in ["egonet", "gate", "fusion", "fusion_ego_only"] {
         let w = web_rows.iter().find(|r| r["network"].as_str() == Some(name));
         let n = native_rows.iter().find(|r| r["network"].as_str() == Some(name)).unwrap_or(&null);
         if w.is_none() && n.is_null() {
@@ -214,7 +214,7 @@ pub(crate) fn print_network_table(web: Option<&serde_json::Value>, native: &serd
         let web_share = ratio(get("tract_gflops"), get("attainable_gflops"));
         let native_share = ratio(num(n, "gflops"), num(n, "attainable_gflops"));
         println!(
-            "  {name:<7} {:>8} {:>9} {:>7} {:>9} {:>13} {:>13} {:>8} {:>8} {:>15}",
+            "  {name:<15} {:>8} {:>9} {:>7} {:>9} {:>13} {:>13} {:>8} {:>8} {:>15}",
             cell(num(n, "flops").or_else(|| get("flops")).map(|f| f / 1e6), 2),
             cell(get("tract_ms"), 3),
             cell(get("ort_ms"), 3),

@@ -210,6 +210,17 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
                 row["frames"],
             );
         }
+        if let Some(first) = &app.first_skeleton {
+            let ms = |run: &str, mark: &str| first[run][mark].as_f64().map_or("–".to_string(), |v| format!("{v:.0}"));
+            println!(
+                "time to first skeleton (page load → sample drawn): cold {} ms, warm {} ms (goal warm ≤ {} ms); models ready {} / {} ms",
+                ms("cold_ms", "first-skeleton"),
+                ms("warm_ms", "first-skeleton"),
+                first["goal_warm_first_skeleton_ms"],
+                ms("cold_ms", "models-ready"),
+                ms("warm_ms", "models-ready"),
+            );
+        }
         let r = &app.relay;
         println!(
             "relay load: {} streams × {} Hz, {} viewers: {} of {} frames received, {} lost, {} dropped; latency p50 {:.2} / p95 {:.2} / p99 {:.2} ms; relay CPU {:.1} %, peak {:.1} MiB",
@@ -242,6 +253,8 @@ struct WebAppRun {
     live: serde_json::Value,
     /// `egoexo live load`'s report.
     relay: serde_json::Value,
+    /// The e2e suite's time to first skeleton (`target/e2e/first-skeleton.json`), cold and warm.
+    first_skeleton: Option<serde_json::Value>,
 }
 
 /// Builds `dist/` (models from `models/` or `EGOEXO_MODELS`), then runs the Playwright suite
@@ -257,7 +270,9 @@ fn run_web_app(root: &Path, t: &tools::BrowserTestTools, phases: &mut Phases) ->
     let live = phases.time("web app: live bench", || e2e::run_live_bench(root, &run, TEST_LIVE_BENCH_SECONDS))?;
     let relay =
         phases.time("relay load (50 streams × 30 Hz)", || e2e::run_relay_load(root, 50, TEST_RELAY_LOAD_SECONDS))?;
-    Ok(WebAppRun { sizes, e2e, bench, live, relay })
+    let first_skeleton =
+        std::fs::read(run.out.join("first-skeleton.json")).ok().and_then(|bytes| serde_json::from_slice(&bytes).ok());
+    Ok(WebAppRun { sizes, e2e, bench, live, relay, first_skeleton })
 }
 
 /// The WebDriver capabilities file: Debian's Chromium binary and the flags it needs here.

@@ -162,6 +162,10 @@ class Attention(nn.Module):
         self.heads = heads
         self.qkv = nn.Linear(dim, 3 * dim)
         self.out = nn.Linear(dim, dim)
+        # [dim, heads]: 1 where a channel belongs to a head. Sums per-channel products into
+        # per-head scores and spreads per-head weights back over the channels (`first_query_only`).
+        self.register_buffer("head_channels", torch.repeat_interleave(torch.eye(heads), dim // heads, dim=0),
+                             persistent=False)
 
     def forward(self, x: torch.Tensor, key_bias: torch.Tensor | None, first_query_only: bool = False) -> torch.Tensor:
         """``x [B,S,D]`` -> ``[B,S,D]``, or ``[B,1,D]`` (the first token's output only) with
@@ -173,17 +177,25 @@ class Attention(nn.Module):
             value = nn.functional.linear(x, self.qkv.weight[2 * d:], self.qkv.bias[2 * d:])
             return self.out(value)
         if first_query_only:
+            # One query against a few keys (the spatial transformer's ego token against the
+            # observers): per-head dot products as a channel-wise product summed per head by
+            # one matrix product, instead of B x heads tiny products.
             q = nn.functional.linear(x[:, :1], self.qkv.weight[:d], self.qkv.bias[:d])
-            q = q.reshape(b, 1, h, d // h).transpose(1, 2)
-            k, v = nn.functional.linear(x, self.qkv.weight[d:], self.qkv.bias[d:]).reshape(b, s, 2, h, d // h).permute(
-                2, 0, 3, 1, 4)
-        else:
-            q, k, v = self.qkv(x).reshape(b, s, 3, h, d // h).permute(2, 0, 3, 1, 4)
+            kv = nn.functional.linear(x, self.qkv.weight[d:], self.qkv.bias[d:])
+            k, v = kv[..., :d], kv[..., d:]
+            # [B, heads, S]: keys last, so the softmax and the sums run over the last axis.
+            scores = (self.head_channels.T @ (q * k).transpose(1, 2)) * (1.0 / math.sqrt(d // h))
+            if key_bias is not None:
+                scores = scores + key_bias[:, None, :]
+            attn = torch.softmax(scores, dim=-1)
+            # Each channel's head weight per key [B, D, S], times the values, summed over keys.
+            return self.out(((self.head_channels @ attn) * v.transpose(1, 2)).sum(dim=-1).unsqueeze(1))
+        q, k, v = self.qkv(x).reshape(b, s, 3, h, d // h).permute(2, 0, 3, 1, 4)
         scores = torch.matmul(q, k.transpose(-1, -2)) * (1.0 / math.sqrt(d // h))
         if key_bias is not None:
             scores = scores + key_bias[:, None, None, :]
         attn = torch.softmax(scores, dim=-1)
-        return self.out(torch.matmul(attn, v).permute(0, 2, 1, 3).reshape(b, q.shape[2], d))
+        return self.out(torch.matmul(attn, v).permute(0, 2, 1, 3).reshape(b, s, d))
 
 
 class EncoderLayer(nn.Module):

@@ -3,7 +3,9 @@
 //! kind's FLOPs (tract's cost model) and GFLOP/s — the arithmetic (products) against the
 //! rest (layout changes, elementwise ops, normalisation, softmax).
 //!
-//! `cargo run --release -p egoexo-infer --example profile_network -- MODELS_DIR [POINTS] [NETWORK] [RUNS]`
+//! With `TOP` > 0 it also lists the `TOP` slowest nodes (name, op, output shape).
+//!
+//! `cargo run --release -p egoexo-infer --example profile_network -- MODELS_DIR [POINTS] [NETWORK] [RUNS] [TOP]`
 
 use std::collections::BTreeMap;
 use std::io::Cursor;
@@ -21,10 +23,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let points: u8 = args.get(1).map_or(Ok(3), |p| p.parse())?;
     let network = args.get(2).map_or("fusion", String::as_str);
     let runs: usize = args.get(3).map_or(Ok(50), |r| r.parse())?;
+    let top: usize = args.get(4).map_or(Ok(0), |t| t.parse())?;
     let manifest = Manifest::from_json(&std::fs::read(dir.join("manifest.json"))?)?;
     let set = manifest.model_set_for_points(points).ok_or_else(|| format!("no offline {points}-point model set"))?;
-    let file =
-        set.network(network).ok_or_else(|| format!("no network `{network}`: expected egonet, gate or fusion"))?;
+    let file = set.network(network).ok_or_else(|| {
+        format!("no network `{network}`: expected one of {}", egoexo_infer::manifest::NETWORK_NAMES.join(", "))
+    })?;
     let bytes = std::fs::read(dir.join(&file.file))?;
     let mut model = tract_onnx::onnx().model_for_read(&mut Cursor::new(&bytes))?;
     for (i, shape) in file.input_shapes().iter().enumerate() {
@@ -45,6 +49,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     let kinds: Vec<String> = optimised.nodes().iter().map(|n| n.op.name().to_string()).collect();
+    let described: Vec<String> = optimised
+        .nodes()
+        .iter()
+        .map(|n| {
+            let shape = n.outputs.first().map(|o| format!("{:?}", o.fact.shape)).unwrap_or_default();
+            format!("{} {} -> {shape}", n.name, n.op.name())
+        })
+        .collect();
     let plan = optimised.into_runnable()?;
     let inputs: TVec<TValue> = bench_inputs(&file.inputs)
         .into_iter()
@@ -91,6 +103,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             flops as f64 / 1e6,
             if flops > 0 { format!("{:.1}", flops as f64 / s / 1e9) } else { "-".into() }
         );
+    }
+    if top > 0 {
+        let mut nodes: Vec<usize> = (0..kinds.len()).collect();
+        nodes.sort_by(|&a, &b| seconds[b].total_cmp(&seconds[a]));
+        println!("slowest nodes:");
+        for id in nodes.into_iter().take(top) {
+            println!("  {:>7.3} ms  {}", seconds[id] / runs as f64 * 1e3, described[id]);
+        }
     }
     Ok(())
 }

@@ -213,12 +213,16 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
         if let Some(first) = &app.first_skeleton {
             let ms = |run: &str, mark: &str| first[run][mark].as_f64().map_or("–".to_string(), |v| format!("{v:.0}"));
             println!(
-                "time to first skeleton (page load → sample drawn): cold {} ms, warm {} ms (goal warm ≤ {} ms); models ready {} / {} ms",
+                "time to first skeleton (page load → sample drawn): cold {} ms, warm {} ms (goal warm ≤ {} ms); models ready {} / {} ms (read {} / {}, check + load {} / {})",
                 ms("cold_ms", "first-skeleton"),
                 ms("warm_ms", "first-skeleton"),
                 first["goal_warm_first_skeleton_ms"],
                 ms("cold_ms", "models-ready"),
                 ms("warm_ms", "models-ready"),
+                ms("cold_ms", "models-read"),
+                ms("warm_ms", "models-read"),
+                ms("cold_ms", "models-load"),
+                ms("warm_ms", "models-load"),
             );
         }
         let r = &app.relay;

@@ -494,6 +494,16 @@ pub struct ModelsSummary {
     pub model_sets: Vec<ModelSetSummary>,
     /// Total size of the ONNX files.
     pub bytes: u64,
+    /// How long the worker took, by the glue's clock (absent without one; added within
+    /// version 3): reading the manifest and the files (Cache API or network), ms.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub read_ms: Option<u32>,
+    /// ... checking every file's sha256 and loading it (tract: parse, optimise), ms.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub load_ms: Option<u32>,
+    /// Files that came from the Cache API (the others from the network).
+    #[serde(default)]
+    pub cached_files: usize,
 }
 
 /// One observer of an imported session.

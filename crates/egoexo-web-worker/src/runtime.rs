@@ -439,11 +439,12 @@ impl Runtime {
     /// Fetches `manifest.json` and the files it lists (from the cache where it has them) and
     /// loads them; once more without the cache if that fails with cached files.
     async fn load_models(&self) -> Result<ModelsSummary, ModelsFailure> {
+        let started = self.clock_ms();
         let manifest_url = resolve_url("manifest.json", &self.models_url)?;
         let manifest = fetch_bytes(&self.scope, &manifest_url, true).await?;
         let listed = SessionWorker::model_files(&manifest).map_err(|e| (e.kind(), e.to_string()))?;
         let cache = open_cache(&self.scope).await;
-        let first = self.load_listed(&manifest, &listed, cache.as_ref(), true).await;
+        let first = self.load_listed(&manifest, &listed, cache.as_ref(), true, started).await;
         match (first, &cache) {
             (Ok(summary), _) => Ok(summary),
             (Err(failure), None) => Err(failure),
@@ -452,7 +453,7 @@ impl Runtime {
                 for f in &listed {
                     let _ = JsFuture::from(cache.delete_with_str(&self.cache_key(f)?)).await;
                 }
-                self.load_listed(&manifest, &listed, Some(cache), false).await
+                self.load_listed(&manifest, &listed, Some(cache), false, started).await
             }
         }
     }
@@ -468,6 +469,7 @@ impl Runtime {
         listed: &[ModelFileRef],
         cache: Option<&Cache>,
         use_cache: bool,
+        started: Option<f64>,
     ) -> Result<ModelsSummary, ModelsFailure> {
         let mut files: BTreeMap<String, Vec<u8>> = BTreeMap::new();
         // Every missing file's request starts before any is awaited, so they download together.
@@ -488,12 +490,14 @@ impl Runtime {
                 }
             }
         }
+        let cached_files = files.len();
         let mut fetched = Vec::new();
         for (f, url, response) in downloads {
             files.insert(f.file.clone(), response_bytes(response, &url).await?);
             fetched.push(f);
         }
-        let summary = self
+        let read = self.clock_ms();
+        let mut summary = self
             .worker
             .borrow_mut()
             .load_models(manifest, |file| {
@@ -503,6 +507,11 @@ impl Runtime {
                     .ok_or_else(|| InferError::ReadModel { file: file.to_string(), message: "not fetched".into() })
             })
             .map_err(|e| (e.kind(), e.to_string()))?;
+        let loaded = self.clock_ms();
+        let ms = |from: Option<f64>, to: Option<f64>| Some((to? - from?).max(0.0).round() as u32);
+        summary.read_ms = ms(started, read);
+        summary.load_ms = ms(read, loaded);
+        summary.cached_files = cached_files;
         if let Some(cache) = cache {
             // Cache only what checked out, and forget other versions.
             for f in fetched {

@@ -244,7 +244,7 @@ impl SessionWorker {
         let bytes = manifest.files().iter().map(|f| f.bytes).sum();
         self.models = Some(models);
         self.manifest = Some(manifest);
-        Ok(ModelsSummary { model_sets: sets, bytes })
+        Ok(ModelsSummary { model_sets: sets, bytes, read_ms: None, load_ms: None, cached_files: 0 })
     }
 
     /// Whether models are loaded.

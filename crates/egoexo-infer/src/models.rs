@@ -5,8 +5,8 @@
 use std::collections::BTreeMap;
 use std::io::Cursor;
 use std::ops::{Add, Sub};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use serde::{Deserialize, Serialize};
 use tract_onnx::prelude::*;
@@ -16,31 +16,81 @@ use crate::engine::Engine;
 use crate::manifest::{Manifest, ModelFile, ModelSetManifest, sha256_hex};
 
 /// One optimised ONNX graph with fixed input shapes. Clones share the graph and the run
-/// counter.
+/// counter. A model loaded with [`OnnxModel::load_deferred`] keeps its (checked) bytes and is
+/// parsed and optimised on its first run or [`OnnxModel::prepare`] — the browser's worker
+/// loads every tracking mode's networks that way, so a session only pays for its own mode.
 #[derive(Clone)]
 pub struct OnnxModel {
     name: String,
-    plan: Arc<TypedRunnableModel>,
+    plan: Arc<OnceLock<Result<Arc<TypedRunnableModel>, String>>>,
+    /// The file's bytes until the plan is made (deferred models only).
+    pending: Arc<Mutex<Option<Vec<u8>>>>,
     input_shapes: Vec<Vec<usize>>,
     runs: Arc<AtomicU64>,
 }
 
 impl std::fmt::Debug for OnnxModel {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("OnnxModel").field("name", &self.name).field("input_shapes", &self.input_shapes).finish()
+        f.debug_struct("OnnxModel")
+            .field("name", &self.name)
+            .field("input_shapes", &self.input_shapes)
+            .field("ready", &self.is_ready())
+            .finish()
     }
+}
+
+/// Parses, types with `input_shapes` (all `f32`), optimises and plans a model.
+fn optimised_plan(bytes: &[u8], input_shapes: &[Vec<usize>]) -> Result<Arc<TypedRunnableModel>, String> {
+    let err = |e: TractError| format!("{e:#}");
+    let mut model = tract_onnx::onnx().model_for_read(&mut Cursor::new(bytes)).map_err(err)?;
+    for (i, shape) in input_shapes.iter().enumerate() {
+        model = model.with_input_fact(i, f32::fact(shape).into()).map_err(err)?;
+    }
+    model.into_optimized().map_err(err)?.into_runnable().map_err(err)
 }
 
 impl OnnxModel {
     /// Parses, types with `input_shapes` (all `f32`), optimises and plans a model.
     pub fn load(name: &str, bytes: &[u8], input_shapes: &[Vec<usize>]) -> Result<Self, InferError> {
-        let err = |e: TractError| InferError::Model { model: name.to_string(), message: format!("{e:#}") };
-        let mut model = tract_onnx::onnx().model_for_read(&mut Cursor::new(bytes)).map_err(err)?;
-        for (i, shape) in input_shapes.iter().enumerate() {
-            model = model.with_input_fact(i, f32::fact(shape).into()).map_err(err)?;
+        let plan = optimised_plan(bytes, input_shapes)
+            .map_err(|message| InferError::Model { model: name.to_string(), message })?;
+        Ok(Self {
+            name: name.to_string(),
+            plan: Arc::new(OnceLock::from(Ok(plan))),
+            pending: Arc::default(),
+            input_shapes: input_shapes.to_vec(),
+            runs: Arc::default(),
+        })
+    }
+
+    /// A model parsed and optimised on its first run or [`Self::prepare`] (whose error, a
+    /// malformed file, comes then).
+    pub fn load_deferred(name: &str, bytes: Vec<u8>, input_shapes: &[Vec<usize>]) -> Self {
+        Self {
+            name: name.to_string(),
+            plan: Arc::default(),
+            pending: Arc::new(Mutex::new(Some(bytes))),
+            input_shapes: input_shapes.to_vec(),
+            runs: Arc::default(),
         }
-        let plan = model.into_optimized().map_err(err)?.into_runnable().map_err(err)?;
-        Ok(Self { name: name.to_string(), plan, input_shapes: input_shapes.to_vec(), runs: Arc::default() })
+    }
+
+    /// Whether the model is parsed and optimised (or failed to be).
+    pub fn is_ready(&self) -> bool {
+        self.plan.get().is_some()
+    }
+
+    /// Parses and optimises a deferred model now (nothing for one already made).
+    pub fn prepare(&self) -> Result<(), InferError> {
+        self.plan().map(|_| ())
+    }
+
+    fn plan(&self) -> Result<&Arc<TypedRunnableModel>, InferError> {
+        let plan = self.plan.get_or_init(|| {
+            let bytes = self.pending.lock().map_err(|_| "a run panicked while the model loaded".to_string())?.take();
+            optimised_plan(&bytes.unwrap_or_default(), &self.input_shapes)
+        });
+        plan.as_ref().map_err(|message| InferError::Model { model: self.name.clone(), message: message.clone() })
     }
 
     /// How many times the model has run (successfully or not) since it was loaded.
@@ -73,7 +123,7 @@ impl OnnxModel {
             }
             values.push(Tensor::from_shape(shape, data).map_err(err)?.into());
         }
-        let outputs = self.plan.run(values).map_err(err)?;
+        let outputs = self.plan()?.run(values).map_err(err)?;
         outputs.iter().map(|t| Ok(t.to_plain_array_view::<f32>().map_err(err)?.iter().copied().collect())).collect()
     }
 }
@@ -144,7 +194,21 @@ impl ModelSet {
         manifest: &ModelSetManifest,
         mut read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
     ) -> Result<Self, InferError> {
-        Self::load_sharing(manifest, &mut read, &mut Vec::new())
+        Self::load_sharing(manifest, &mut read, &mut Vec::new(), Loading::Now)
+    }
+
+    /// Parses and optimises every network of the set that is not yet (deferred loading).
+    pub fn prepare(&self) -> Result<(), InferError> {
+        self.networks().try_for_each(OnnxModel::prepare)
+    }
+
+    /// Whether every network of the set is parsed and optimised.
+    pub fn is_ready(&self) -> bool {
+        self.networks().all(OnnxModel::is_ready)
+    }
+
+    fn networks(&self) -> impl Iterator<Item = &OnnxModel> {
+        [Some(&self.egonet), Some(&self.gate), Some(&self.fusion), self.fusion_ego_only.as_ref()].into_iter().flatten()
     }
 
     /// [`ModelSet::load`] reusing the models already in `loaded` (by file and sha256) and
@@ -153,6 +217,7 @@ impl ModelSet {
         manifest: &ModelSetManifest,
         read: &mut dyn FnMut(&str) -> Result<Vec<u8>, InferError>,
         loaded: &mut Vec<(ModelFile, OnnxModel)>,
+        loading: Loading,
     ) -> Result<Self, InferError> {
         let mut load = |file: &ModelFile| -> Result<OnnxModel, InferError> {
             if let Some((_, model)) = loaded.iter().find(|(f, _)| f.file == file.file && f.sha256 == file.sha256) {
@@ -168,7 +233,10 @@ impl ModelSet {
                 });
             }
             let shapes: Vec<Vec<usize>> = file.inputs.iter().map(|i| i.shape.clone()).collect();
-            let model = OnnxModel::load(&file.file, &bytes, &shapes)?;
+            let model = match loading {
+                Loading::Now => OnnxModel::load(&file.file, &bytes, &shapes)?,
+                Loading::Deferred => OnnxModel::load_deferred(&file.file, bytes, &shapes),
+            };
             loaded.push((file.clone(), model.clone()));
             Ok(model)
         };
@@ -191,18 +259,36 @@ pub struct LoadedModels {
     live: BTreeMap<usize, Engine>,
 }
 
+/// When a network is parsed and optimised: as it is loaded, or on its first use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Loading {
+    Now,
+    /// [`OnnxModel::load_deferred`]: the files are read and checked now, each network is
+    /// parsed and optimised on its first run or [`ModelSet::prepare`].
+    Deferred,
+}
+
 impl LoadedModels {
     /// Loads every set of `manifest`, reading each file through `read` (a path relative to the
     /// models folder → bytes) once and checking its sha256.
     pub fn load(
         manifest: &Manifest,
+        read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
+    ) -> Result<Self, InferError> {
+        Self::load_with(manifest, read, Loading::Now)
+    }
+
+    /// [`Self::load`], parsing and optimising the networks now or on first use.
+    pub fn load_with(
+        manifest: &Manifest,
         mut read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
+        loading: Loading,
     ) -> Result<Self, InferError> {
         let mut loaded = Vec::new();
         let mut offline_sets = Vec::new();
         let mut live_sets: BTreeMap<usize, Vec<ModelSet>> = BTreeMap::new();
         for set in &manifest.model_sets {
-            let models = ModelSet::load_sharing(set, &mut read, &mut loaded)?;
+            let models = ModelSet::load_sharing(set, &mut read, &mut loaded, loading)?;
             match set.lookahead {
                 None => offline_sets.push(models),
                 Some(lookahead) => live_sets.entry(lookahead).or_default().push(models),

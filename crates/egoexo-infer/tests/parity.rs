@@ -6,6 +6,8 @@ mod common;
 
 use common::*;
 use egoexo_core::TrackingMode;
+use egoexo_infer::models::{Loading, OnnxModel};
+use egoexo_infer::{InferError, LoadedModels};
 
 struct Reference {
     index: serde_json::Value,
@@ -62,6 +64,39 @@ fn tract_matches_pytorch_and_onnxruntime_within_1e_4() {
             }
         }
     }
+}
+
+/// A deferred model is parsed and optimised on its first run, to the same outputs; a malformed
+/// file fails then, naming the model; loading a whole manifest deferred prepares nothing.
+#[test]
+fn a_deferred_model_is_made_on_first_use_with_the_same_outputs() {
+    let reference = Reference::load();
+    let manifest = fixture_manifest();
+    let file = &manifest.model_set(TrackingMode::ThreePoint).unwrap().egonet;
+    let bytes = std::fs::read(fixture_dir().join(&file.file)).unwrap();
+    let eager = OnnxModel::load(&file.file, &bytes, &file.input_shapes()).unwrap();
+    let deferred = OnnxModel::load_deferred(&file.file, bytes.clone(), &file.input_shapes());
+    assert!(eager.is_ready() && !deferred.is_ready());
+    let input = reference.array("egonet/input/ego");
+    assert_eq!(deferred.run(&[input]).unwrap(), eager.run(&[input]).unwrap());
+    assert!(deferred.is_ready());
+
+    let broken = OnnxModel::load_deferred("3pt/broken.onnx", bytes[..bytes.len() / 2].to_vec(), &file.input_shapes());
+    let err = broken.prepare().unwrap_err().to_string();
+    assert!(err.contains("3pt/broken.onnx"), "{err}");
+    assert!(broken.run(&[input]).unwrap_err().to_string().contains("3pt/broken.onnx"), "the failure stays");
+
+    let dir = fixture_dir();
+    let read = |f: &str| {
+        std::fs::read(dir.join(f)).map_err(|e| InferError::ReadModel { file: f.into(), message: e.to_string() })
+    };
+    let loaded = LoadedModels::load_with(&manifest, read, Loading::Deferred).unwrap();
+    let (one, three) = (TrackingMode::OnePoint, TrackingMode::ThreePoint);
+    assert!(!loaded.offline().models(one).unwrap().is_ready());
+    let set = loaded.offline().models(three).unwrap();
+    assert!(!set.is_ready());
+    set.prepare().unwrap();
+    assert!(set.is_ready() && !loaded.offline().models(one).unwrap().is_ready());
 }
 
 #[test]

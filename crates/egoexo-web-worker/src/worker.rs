@@ -9,11 +9,12 @@ use std::collections::BTreeMap;
 use std::rc::Rc;
 use std::sync::Arc;
 
-use egoexo_core::SmplMotion;
 use egoexo_core::aligned::AlignedSession;
 use egoexo_core::camera::Projection;
 use egoexo_core::metrics::MetricsAccumulator;
+use egoexo_core::{SmplMotion, TrackingMode};
 use egoexo_infer::manifest::Manifest;
+use egoexo_infer::models::Loading;
 use egoexo_infer::{
     InferError, LoadedModels, Method, NetworkRuns, ReconstructOptions, Reconstruction, ReconstructionJob, Stage,
     StageTimer, StageTimings, TimedStage,
@@ -223,14 +224,17 @@ impl SessionWorker {
 
     /// Loads every model set of the manifest (the offline networks and any live variants),
     /// reading each file once through `read` (path relative to the models folder → bytes);
-    /// each file's sha256 is checked against the manifest.
+    /// each file's sha256 is checked against the manifest. The networks are parsed and
+    /// optimised when a reconstruction (or live frame) first needs their tracking mode.
     pub fn load_models(
         &mut self,
         manifest_json: &[u8],
         read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
     ) -> Result<ModelsSummary, WorkerError> {
         let manifest = Manifest::from_json(manifest_json).map_err(WorkerError::Models)?;
-        let models = LoadedModels::load(&manifest, read).map_err(WorkerError::Models)?;
+        // Checked now, parsed and optimised per tracking mode when a reconstruction first
+        // needs it: a session pays only for its own mode's networks.
+        let models = LoadedModels::load_with(&manifest, read, Loading::Deferred).map_err(WorkerError::Models)?;
         let sets = manifest
             .model_sets
             .iter()
@@ -245,6 +249,17 @@ impl SessionWorker {
         self.models = Some(models);
         self.manifest = Some(manifest);
         Ok(ModelsSummary { model_sets: sets, bytes, read_ms: None, load_ms: None, cached_files: 0 })
+    }
+
+    /// The tracking modes (points) whose offline networks are parsed and optimised: none
+    /// after [`Self::load_models`], a mode's once a reconstruction needed it.
+    pub fn prepared_tracking_points(&self) -> Vec<u8> {
+        let Some(models) = &self.models else { return Vec::new() };
+        [TrackingMode::OnePoint, TrackingMode::ThreePoint]
+            .into_iter()
+            .filter(|&mode| models.offline().models(mode).is_some_and(|set| set.is_ready()))
+            .map(TrackingMode::points)
+            .collect()
     }
 
     /// Whether models are loaded.
@@ -328,6 +343,11 @@ impl SessionWorker {
         let methods: &[Method] = if ego_only_overlay { &[Method::EgoExo, Method::EgoOnly] } else { &[Method::EgoExo] };
         let options = ReconstructOptions::default();
         let job = engine.start(&open.aligned, &options, methods)?;
+        // The mode's networks are parsed and optimised here, not inside the first window's
+        // stage timings.
+        if let Some(set) = engine.models(job.plan().tracking) {
+            set.prepare()?;
+        }
         Ok(ReconstructionTask { job, runs_before: engine.network_runs() })
     }
 

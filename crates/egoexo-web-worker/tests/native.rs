@@ -163,6 +163,32 @@ fn progress_covers_every_window_of_every_pass_in_order() {
     assert_eq!(summary.observer_ray_frames.keys().collect::<Vec<_>>(), ["observer-1", "observer-2"]);
 }
 
+/// The models are checked as they load and each tracking mode's networks are parsed and
+/// optimised when a reconstruction first needs them: the 3-point fixture session prepares the
+/// 3-point set and leaves the 1-point set as checked bytes.
+#[test]
+fn a_tracking_modes_networks_are_prepared_when_a_reconstruction_first_needs_them() {
+    let mut worker = worker_with_models();
+    assert_eq!(worker.prepared_tracking_points(), Vec::<u8>::new());
+    worker.import_archive(SESSION_NAME, SESSION.to_vec()).unwrap();
+    assert_eq!(worker.prepared_tracking_points(), Vec::<u8>::new(), "importing needs no network");
+    let summary = worker.reconstruct(false, &mut |_| true).unwrap();
+    assert_eq!(summary.tracking_points, 3);
+    assert_eq!(worker.prepared_tracking_points(), [3]);
+    // A damaged file is still refused when the models load, not at first use.
+    let mut damaged = SessionWorker::new();
+    let err = damaged
+        .load_models(MANIFEST, |file| {
+            let mut bytes = read_fixture_model(file)?;
+            if file == "1pt/fusion.onnx" {
+                bytes[10] ^= 1;
+            }
+            Ok(bytes)
+        })
+        .unwrap_err();
+    assert!(err.to_string().contains("1pt/fusion.onnx") && err.to_string().contains("sha256"), "{err}");
+}
+
 /// The app's whole job (ego-exo and the ego-only overlay) runs EgoNet once per window: the
 /// overlay reuses the ego pass. Counted on the models themselves.
 #[test]

@@ -207,6 +207,11 @@ impl ModelSet {
         self.networks().all(OnnxModel::is_ready)
     }
 
+    /// The first network of the set not yet parsed and optimised.
+    pub fn next_unprepared(&self) -> Option<&OnnxModel> {
+        self.networks().find(|n| !n.is_ready())
+    }
+
     fn networks(&self) -> impl Iterator<Item = &OnnxModel> {
         [Some(&self.egonet), Some(&self.gate), Some(&self.fusion), self.fusion_ego_only.as_ref()].into_iter().flatten()
     }

@@ -262,10 +262,8 @@ impl Runtime {
                 let saved = self.worker.borrow().save_session();
                 self.post_exported(job, saved);
             }
-            WorkerRequest::WarmUp
-            | WorkerRequest::Cancel { .. }
-            | WorkerRequest::PanicForTest
-            | WorkerRequest::LiveLookahead { .. } => {}
+            WorkerRequest::WarmUp => self.prepare_while_idle().await,
+            WorkerRequest::Cancel { .. } | WorkerRequest::PanicForTest | WorkerRequest::LiveLookahead { .. } => {}
         }
     }
 
@@ -429,6 +427,22 @@ impl Runtime {
             created_by: manifest.created_by,
         });
         Ok(())
+    }
+
+    /// Parses and optimises the networks one at a time while no request waits (the user is
+    /// still choosing a session): yields between networks and stops as soon as one arrives —
+    /// whatever is left is prepared when a reconstruction needs it. A malformed network is
+    /// left for that reconstruction to report.
+    async fn prepare_while_idle(&self) {
+        loop {
+            self.yield_now().await;
+            if !self.queue.borrow().is_empty() {
+                return;
+            }
+            if !matches!(self.worker.borrow().prepare_next_network(), Ok(true)) {
+                return;
+            }
+        }
     }
 
     /// Lets the event loop run (and so a `cancel` arrive): resolves on the next task.

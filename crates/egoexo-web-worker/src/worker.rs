@@ -14,7 +14,7 @@ use egoexo_core::camera::Projection;
 use egoexo_core::metrics::MetricsAccumulator;
 use egoexo_core::{SmplMotion, TrackingMode};
 use egoexo_infer::manifest::Manifest;
-use egoexo_infer::models::Loading;
+use egoexo_infer::models::{Loading, ModelSet};
 use egoexo_infer::{
     InferError, LoadedModels, Method, NetworkRuns, ReconstructOptions, Reconstruction, ReconstructionJob, Stage,
     StageTimer, StageTimings, TimedStage,
@@ -260,6 +260,20 @@ impl SessionWorker {
             .filter(|&mode| models.offline().models(mode).is_some_and(|set| set.is_ready()))
             .map(TrackingMode::points)
             .collect()
+    }
+
+    /// Parses and optimises one network not yet prepared, the offline 3-point set's first,
+    /// then the 1-point set's (live variants when first used); `Ok(false)` when none is left.
+    pub fn prepare_next_network(&self) -> Result<bool, WorkerError> {
+        let Some(models) = &self.models else { return Ok(false) };
+        let next = [TrackingMode::ThreePoint, TrackingMode::OnePoint]
+            .into_iter()
+            .filter_map(|mode| models.offline().models(mode))
+            .find_map(ModelSet::next_unprepared);
+        match next {
+            Some(network) => network.prepare().map(|()| true).map_err(WorkerError::Models),
+            None => Ok(false),
+        }
     }
 
     /// Whether models are loaded.

@@ -175,6 +175,20 @@ fn a_tracking_modes_networks_are_prepared_when_a_reconstruction_first_needs_them
     let summary = worker.reconstruct(false, &mut |_| true).unwrap();
     assert_eq!(summary.tracking_points, 3);
     assert_eq!(worker.prepared_tracking_points(), [3]);
+    // While idle, the worker prepares the rest one network at a time: the 1-point set's four.
+    let mut prepared = 0;
+    while worker.prepare_next_network().unwrap() {
+        prepared += 1;
+        assert!(prepared <= 4, "only the 1-point set was left");
+    }
+    assert_eq!(prepared, 4);
+    assert_eq!(worker.prepared_tracking_points(), [1, 3]);
+    // From the start, the 3-point set comes first.
+    let fresh = worker_with_models();
+    for _ in 0..4 {
+        assert!(fresh.prepare_next_network().unwrap());
+    }
+    assert_eq!(fresh.prepared_tracking_points(), [3]);
     // A damaged file is still refused when the models load, not at first use.
     let mut damaged = SessionWorker::new();
     let err = damaged

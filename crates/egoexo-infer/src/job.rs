@@ -15,6 +15,7 @@
 //! chunk runs pass by pass.
 
 use egoexo_core::aligned::AlignedSession;
+use egoexo_core::ego_features::TrackingMode;
 
 use crate::InferError;
 use crate::decode::{MotionAssembler, assemble_reconstruction};
@@ -179,13 +180,7 @@ impl ReconstructionJob {
         } else {
             let method = self.methods[self.pass - 1];
             let ego = &self.ego[self.window];
-            let output = match method.exo_mode() {
-                None => WindowOutput::from_coarse(ego),
-                Some(mode) => {
-                    let models = engine.require_models(tracking)?;
-                    observer_fusion_pass(aligned, models, ego, &self.plan.observers, mode, timer)?
-                }
-            };
+            let output = method_window(engine, aligned, tracking, &self.plan.observers, method, ego, timer)?;
             let assembler = &mut self.assemblers[self.pass - 1];
             timer.time(TimedStage::Decode, || assembler.add(&output))?;
             Stage::Fusion(method)
@@ -239,13 +234,9 @@ impl ReconstructionJob {
             for (method, assembler) in self.methods.iter().zip(&mut self.assemblers) {
                 let outputs: Vec<WindowOutput> = ego
                     .par_iter()
-                    .map(|ego| match method.exo_mode() {
-                        None => Ok(WindowOutput::from_coarse(ego)),
-                        Some(mode) => {
-                            let models = engine.require_models(tracking)?;
-                            let observers = &self.plan.observers;
-                            observer_fusion_pass(aligned, models, ego, observers, mode, &mut StageTimer::off())
-                        }
+                    .map(|ego| {
+                        let observers = &self.plan.observers;
+                        method_window(engine, aligned, tracking, observers, *method, ego, &mut StageTimer::off())
                     })
                     .collect::<Result<_, _>>()?;
                 for output in &outputs {
@@ -319,5 +310,22 @@ impl ReconstructionJob {
                 })
                 .collect()
         })
+    }
+}
+
+/// One method's window after the shared ego pass: a baseline's coarse pose as it is, or the
+/// network methods' exo and fusion passes ([`observer_fusion_pass`]).
+fn method_window(
+    engine: &Engine,
+    aligned: &AlignedSession,
+    tracking: TrackingMode,
+    observers: &[usize],
+    method: Method,
+    ego: &EgoPassOutput,
+    timer: &mut StageTimer<'_>,
+) -> Result<WindowOutput, InferError> {
+    match method.exo_mode() {
+        None => Ok(WindowOutput::from_coarse(ego)),
+        Some(mode) => observer_fusion_pass(aligned, engine.require_models(tracking)?, ego, observers, mode, timer),
     }
 }

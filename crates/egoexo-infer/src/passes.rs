@@ -202,6 +202,21 @@ impl WindowOutput {
             gates: None,
         }
     }
+
+    /// A window whose poses are a fusion graph's outputs (`root_6d`, `body_6d`) of `model`.
+    fn from_fusion(
+        ego: &EgoPassOutput,
+        model: &OnnxModel,
+        outputs: &[Vec<f32>],
+        gates: Option<WindowGates>,
+    ) -> Result<Self, InferError> {
+        Ok(WindowOutput {
+            plan: ego.window.plan.clone(),
+            r_world_window: ego.window.t_world_window.rotation,
+            poses: concat_pose(model.name(), outputs)?,
+            gates,
+        })
+    }
 }
 
 /// The ego-only fusion pass: the fusion network with every observer masked, as its own graph
@@ -215,15 +230,8 @@ pub fn fusion_ego_only_pass(
     timer: &mut StageTimer<'_>,
 ) -> Option<Result<WindowOutput, InferError>> {
     let model = models.fusion_ego_only.as_ref()?;
-    let output = timer.time(TimedStage::Fusion, || model.run(&[&ego.window.ego, &ego.coarse])).and_then(|out| {
-        Ok(WindowOutput {
-            plan: ego.window.plan.clone(),
-            r_world_window: ego.window.t_world_window.rotation,
-            poses: concat_pose(model.name(), &out)?,
-            gates: None,
-        })
-    });
-    Some(output)
+    let output = timer.time(TimedStage::Fusion, || model.run(&[&ego.window.ego, &ego.coarse]));
+    Some(output.and_then(|out| WindowOutput::from_fusion(ego, model, &out, None)))
 }
 
 /// One method's passes after the shared ego pass: [`exo_pass`] then [`fusion_pass`], or, for
@@ -257,10 +265,5 @@ pub fn fusion_pass(
         let exo_input = fusion_exo_input(&exo.exo, &exo.gate);
         models.fusion.run(&[&ego.window.ego, &ego.coarse, &exo_input, &exo.exo.observer_mask])
     })?;
-    Ok(WindowOutput {
-        plan: ego.window.plan.clone(),
-        r_world_window: ego.window.t_world_window.rotation,
-        poses: concat_pose(models.fusion.name(), &out)?,
-        gates: exo.window_gates(),
-    })
+    WindowOutput::from_fusion(ego, &models.fusion, &out, exo.window_gates())
 }

@@ -13,13 +13,23 @@
 //! coarse pose decoded). Only a chunk's ego outputs are held at once, so an hour-long session
 //! (~2,300 windows) never holds every window's features and coarse pose; a session of up to a
 //! chunk runs pass by pass.
+//!
+//! A chunk is also the unit a pool of workers shares out: [`ReconstructionJob::run_chunk`]
+//! computes a chunk's window outputs without touching the job (in another worker that made
+//! the same job from the same session and options), [`ChunkOutputs`] travel as bytes, and
+//! [`ReconstructionJob::add_chunk`] decodes them in chunk order — the same functions and the
+//! same order of decoding as [`ReconstructionJob::step`], so the same result.
+
+use std::ops::Range;
 
 use egoexo_core::aligned::AlignedSession;
 use egoexo_core::ego_features::TrackingMode;
+use serde::{Deserialize, Serialize};
 
 use crate::InferError;
 use crate::decode::{MotionAssembler, assemble_reconstruction};
 use crate::engine::{CoarsePose, Engine, Method, Progress, ReconstructOptions, Reconstruction, Stage};
+use crate::inputs::POSE_DIM;
 use crate::passes::{EgoPassOutput, WindowOutput, ego_pass, observer_fusion_pass};
 use crate::plan::{ReconstructionPlan, resolve_tracking};
 use crate::timing::{Clock, StageTimer, StageTimings, TimedStage};
@@ -29,6 +39,32 @@ use crate::timing::{Clock, StageTimer, StageTimings, TimedStage};
 /// hour-long session has ~2,300 windows; a chunk is ~100 s of a session at the default
 /// stride).
 pub const WINDOW_CHUNK: usize = 64;
+
+/// One chunk's window outputs, one list per method of the job (in the job's order): what
+/// [`ReconstructionJob::run_chunk`] computes — here or in another worker holding the same
+/// job — and [`ReconstructionJob::add_chunk`] decodes, chunk after chunk.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ChunkOutputs {
+    /// Index of the chunk: its windows are [`ReconstructionJob::chunk_windows`]`(chunk)`.
+    pub chunk: usize,
+    /// Per method, the chunk's windows in order.
+    pub methods: Vec<Vec<WindowOutput>>,
+}
+
+impl ChunkOutputs {
+    /// The outputs as bytes (postcard), to hand to another worker.
+    pub fn to_bytes(&self) -> Result<Vec<u8>, InferError> {
+        postcard::to_allocvec(self).map_err(|e| InferError::Chunk { chunk: self.chunk, message: e.to_string() })
+    }
+
+    /// Outputs from [`Self::to_bytes`]'s bytes.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, InferError> {
+        postcard::from_bytes(bytes).map_err(|e| InferError::Chunk {
+            chunk: usize::MAX,
+            message: format!("{} bytes are not a chunk's window outputs: {e}", bytes.len()),
+        })
+    }
+}
 
 /// One reconstruction of one session with one or more methods (see the module docs).
 #[derive(Clone, Debug)]
@@ -131,6 +167,118 @@ impl ReconstructionJob {
     /// Ego-pass outputs held now (at most a chunk's).
     pub fn held_ego_passes(&self) -> usize {
         self.ego.len()
+    }
+
+    /// Chunks in the job (at the chunk size of [`Self::set_chunk`]).
+    pub fn chunk_count(&self) -> usize {
+        self.plan.windows.len().div_ceil(self.chunk)
+    }
+
+    /// Window indices of chunk `chunk` (empty past the last).
+    pub fn chunk_windows(&self, chunk: usize) -> Range<usize> {
+        let windows = self.plan.windows.len();
+        let start = chunk.saturating_mul(self.chunk).min(windows);
+        start..(start + self.chunk).min(windows)
+    }
+
+    /// The chunk [`Self::add_chunk`] takes next; `None` when every chunk is in, or while a
+    /// chunk is half stepped through with [`Self::step`].
+    pub fn next_chunk(&self) -> Option<usize> {
+        let at_boundary = self.pass == 0 && self.window == 0 && self.chunk_start.is_multiple_of(self.chunk);
+        (at_boundary && self.chunk_start < self.plan.windows.len()).then_some(self.chunk_start / self.chunk)
+    }
+
+    /// Every method's output for window `window` of the plan (its ego pass run once), without
+    /// changing the job: what a chunk is made of.
+    pub fn run_window(
+        &self,
+        engine: &Engine,
+        aligned: &AlignedSession,
+        window: usize,
+        timer: &mut StageTimer<'_>,
+    ) -> Result<Vec<WindowOutput>, InferError> {
+        self.plan.check_session(aligned)?;
+        let plan = self.plan.windows.get(window).ok_or_else(|| {
+            InferError::Window(format!("window {window} of a plan of {} windows", self.plan.windows.len()))
+        })?;
+        let tracking = self.plan.tracking;
+        let source = engine.coarse_pose_source(self.coarse, tracking)?;
+        let ego = ego_pass(aligned, plan, tracking, source, timer)?;
+        self.methods
+            .iter()
+            .map(|&method| method_window(engine, aligned, tracking, &self.plan.observers, method, &ego, timer))
+            .collect()
+    }
+
+    /// [`Self::run_window`], timing its stages with `clock` into [`Self::timings`].
+    pub fn run_window_timed(
+        &mut self,
+        engine: &Engine,
+        aligned: &AlignedSession,
+        window: usize,
+        clock: &mut dyn Clock,
+    ) -> Result<Vec<WindowOutput>, InferError> {
+        let mut timer = StageTimer::new(clock);
+        let outputs = self.run_window(engine, aligned, window, &mut timer);
+        self.timings.merge(&timer.timings);
+        outputs
+    }
+
+    /// Chunk `chunk`'s window outputs, every method, without changing the job.
+    pub fn run_chunk(
+        &self,
+        engine: &Engine,
+        aligned: &AlignedSession,
+        chunk: usize,
+    ) -> Result<ChunkOutputs, InferError> {
+        let windows = self.chunk_windows(chunk);
+        if windows.is_empty() {
+            return Err(InferError::Chunk { chunk, message: format!("the job has {} chunks", self.chunk_count()) });
+        }
+        let mut methods = vec![Vec::with_capacity(windows.len()); self.methods.len()];
+        for window in windows {
+            for (list, output) in
+                methods.iter_mut().zip(self.run_window(engine, aligned, window, &mut StageTimer::off())?)
+            {
+                list.push(output);
+            }
+        }
+        Ok(ChunkOutputs { chunk, methods })
+    }
+
+    /// Decodes chunk [`Self::next_chunk`]'s outputs (computed by [`Self::run_chunk`] here or
+    /// in another worker): every step of the chunk counts as run. Outputs for another chunk,
+    /// another method list or other windows than the plan's are refused, and the job is left
+    /// as it was.
+    pub fn add_chunk(&mut self, outputs: &ChunkOutputs) -> Result<Progress, InferError> {
+        let chunk = outputs.chunk;
+        let refuse = |message: String| Err(InferError::Chunk { chunk, message });
+        match self.next_chunk() {
+            Some(next) if next == chunk => {}
+            Some(next) => return refuse(format!("chunk {next} is the next to decode")),
+            None => return refuse("the job takes no chunk now".into()),
+        }
+        let windows = self.chunk_windows(chunk);
+        if outputs.methods.len() != self.methods.len() {
+            return refuse(format!("{} methods' outputs for a job of {}", outputs.methods.len(), self.methods.len()));
+        }
+        for list in &outputs.methods {
+            let planned = &self.plan.windows[windows.clone()];
+            if list.len() != planned.len()
+                || list.iter().zip(planned).any(|(o, w)| o.plan != *w || o.poses.len() < w.len() * POSE_DIM)
+            {
+                return refuse(format!("outputs are not for windows {windows:?} of this job's plan"));
+            }
+        }
+        for (list, assembler) in outputs.methods.iter().zip(&mut self.assemblers) {
+            for output in list {
+                assembler.add(output)?;
+            }
+        }
+        self.chunk_start = windows.end;
+        self.steps += windows.len() * (1 + self.methods.len());
+        let stage = self.methods.last().map_or(Stage::Ego, |&m| Stage::Fusion(m));
+        Ok(Progress { stage, done: windows.end, total: self.plan.windows.len() })
     }
 
     /// Runs the next step (one window of one pass of the current chunk); `None` when every

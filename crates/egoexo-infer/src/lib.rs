@@ -38,7 +38,7 @@ pub mod timing;
 pub mod windows;
 
 pub use engine::{Engine, Method, ObserverGates, Progress, ReconstructOptions, Reconstruction, Stage};
-pub use job::ReconstructionJob;
+pub use job::{ChunkOutputs, ReconstructionJob};
 pub use models::{LoadedModels, NetworkRuns};
 pub use timing::{Clock, StageTimer, StageTimings, TimedStage};
 
@@ -71,4 +71,8 @@ pub enum InferError {
     Methods(String),
     #[error("cancelled")]
     Cancelled,
+    /// A chunk's outputs computed elsewhere (another worker) that do not fit the job, or
+    /// whose bytes do not decode.
+    #[error("window chunk {chunk}: {message}")]
+    Chunk { chunk: usize, message: String },
 }

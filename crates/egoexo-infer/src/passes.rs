@@ -165,7 +165,7 @@ pub fn exo_pass(
 }
 
 /// Gate values of one window, per slot: `[T, N, K]`.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct WindowGates {
     pub slots: usize,
     /// Which session observer fills each slot.
@@ -181,7 +181,7 @@ impl WindowGates {
 }
 
 /// One window's result, what decoding needs.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct WindowOutput {
     pub plan: WindowPlan,
     /// Rotation of the window frame in the world (`T_world_window`'s).

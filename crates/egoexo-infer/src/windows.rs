@@ -12,7 +12,7 @@ use std::ops::Range;
 pub const WINDOW: usize = 96;
 
 /// One window: which timeline frames it covers and how many padded frames follow them.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct WindowPlan {
     /// Timeline frames covered (`len() ≤ WINDOW`).
     pub frames: Range<usize>,

@@ -187,6 +187,64 @@ fn a_job_steps_chunk_by_chunk_holding_only_a_chunks_ego_passes() {
     assert!(job.set_chunk(4).is_err());
 }
 
+/// A pool of workers: another job made from the same session and options computes chunks in
+/// any order (through bytes, as between workers); the first job decodes them in chunk order
+/// and gets the sequential result. Outputs that do not fit are refused without harm.
+#[test]
+fn chunks_computed_elsewhere_in_any_order_decode_to_the_sequential_result() {
+    let aligned = aligned_session(9.0, 2, TrackingMode::ThreePoint, 11);
+    let engine = engine();
+    let options = ReconstructOptions::default();
+    let methods = [Method::EgoExo, Method::EgoOnly];
+    let sequential = engine.reconstruct_each(&aligned, &options, &methods, &mut |_| true).unwrap();
+    let mut coordinator = engine.start(&aligned, &options, &methods).unwrap();
+    let mut helper = engine.start(&aligned, &options, &methods).unwrap();
+    for job in [&mut coordinator, &mut helper] {
+        job.set_chunk(2).unwrap();
+    }
+    let chunks = coordinator.chunk_count();
+    let windows = coordinator.plan().windows.len();
+    assert!(chunks >= 3, "{chunks} chunks");
+    assert_eq!(coordinator.chunk_windows(chunks - 1).end, windows);
+    assert!(coordinator.chunk_windows(chunks).is_empty());
+    // The helper computes the chunks last to first; the coordinator runs chunk 0 window by
+    // window itself.
+    let mut arrived: Vec<Vec<u8>> =
+        (1..chunks).rev().map(|c| helper.run_chunk(&engine, &aligned, c).unwrap().to_bytes().unwrap()).collect();
+    assert_eq!(helper.done_steps(), 0, "running chunks leaves a job as it was");
+    let own: Vec<Vec<_>> = coordinator
+        .chunk_windows(0)
+        .map(|w| coordinator.run_window(&engine, &aligned, w, &mut StageTimer::off()).unwrap())
+        .collect();
+    let mut first = egoexo_infer::ChunkOutputs { chunk: 0, methods: vec![Vec::new(); methods.len()] };
+    for window in own {
+        for (list, output) in first.methods.iter_mut().zip(window) {
+            list.push(output);
+        }
+    }
+    // Out of order: refused, nothing decoded.
+    let last = egoexo_infer::ChunkOutputs::from_bytes(&arrived[0]).unwrap();
+    assert!(matches!(coordinator.add_chunk(&last), Err(InferError::Chunk { .. })));
+    // Another chunk's windows under this chunk's number: refused.
+    let mut mislabelled = last.clone();
+    mislabelled.chunk = 0;
+    assert!(matches!(coordinator.add_chunk(&mislabelled), Err(InferError::Chunk { .. })));
+    // Bytes that are not outputs: a clear error.
+    let err = egoexo_infer::ChunkOutputs::from_bytes(&arrived[0][..10]).unwrap_err();
+    assert!(err.to_string().contains("not a chunk's window outputs"), "{err}");
+    assert_eq!(coordinator.next_chunk(), Some(0));
+    let p = coordinator.add_chunk(&first).unwrap();
+    assert_eq!((p.done, p.total), (2, windows));
+    while let Some(bytes) = arrived.pop() {
+        let outputs = egoexo_infer::ChunkOutputs::from_bytes(&bytes).unwrap();
+        assert_eq!(coordinator.next_chunk(), Some(outputs.chunk));
+        coordinator.add_chunk(&outputs).unwrap();
+    }
+    assert_eq!(coordinator.next_chunk(), None);
+    assert!(coordinator.is_done());
+    assert_eq!(coordinator.finish(&aligned).unwrap(), sequential);
+}
+
 #[test]
 fn methods_with_different_coarse_poses_cannot_share_a_job() {
     let aligned = aligned_session(3.0, 1, TrackingMode::OnePoint, 12);

@@ -30,6 +30,7 @@ use crate::InferError;
 use crate::decode::{MotionAssembler, assemble_reconstruction};
 use crate::engine::{CoarsePose, Engine, Method, Progress, ReconstructOptions, Reconstruction, Stage};
 use crate::inputs::POSE_DIM;
+use crate::models::NetworkRuns;
 use crate::passes::{EgoPassOutput, WindowOutput, ego_pass, observer_fusion_pass};
 use crate::plan::{ReconstructionPlan, resolve_tracking};
 use crate::timing::{Clock, StageTimer, StageTimings, TimedStage};
@@ -49,9 +50,24 @@ pub struct ChunkOutputs {
     pub chunk: usize,
     /// Per method, the chunk's windows in order.
     pub methods: Vec<Vec<WindowOutput>>,
+    /// The network runs that computed it, as the worker that did counted them (zero unless
+    /// that worker says: [`ReconstructionJob::run_chunk`] leaves the counting to its caller).
+    pub runs: NetworkRuns,
 }
 
 impl ChunkOutputs {
+    /// An empty chunk `chunk` of a job of `methods` methods, to fill window by window.
+    pub fn new(chunk: usize, methods: usize) -> Self {
+        ChunkOutputs { chunk, methods: vec![Vec::new(); methods], runs: NetworkRuns::default() }
+    }
+
+    /// Appends one window's outputs, one per method ([`ReconstructionJob::run_window`]).
+    pub fn push_window(&mut self, outputs: Vec<WindowOutput>) {
+        for (list, output) in self.methods.iter_mut().zip(outputs) {
+            list.push(output);
+        }
+    }
+
     /// The outputs as bytes (postcard), to hand to another worker.
     pub fn to_bytes(&self) -> Result<Vec<u8>, InferError> {
         postcard::to_allocvec(self).map_err(|e| InferError::Chunk { chunk: self.chunk, message: e.to_string() })
@@ -235,15 +251,11 @@ impl ReconstructionJob {
         if windows.is_empty() {
             return Err(InferError::Chunk { chunk, message: format!("the job has {} chunks", self.chunk_count()) });
         }
-        let mut methods = vec![Vec::with_capacity(windows.len()); self.methods.len()];
+        let mut outputs = ChunkOutputs::new(chunk, self.methods.len());
         for window in windows {
-            for (list, output) in
-                methods.iter_mut().zip(self.run_window(engine, aligned, window, &mut StageTimer::off())?)
-            {
-                list.push(output);
-            }
+            outputs.push_window(self.run_window(engine, aligned, window, &mut StageTimer::off())?);
         }
-        Ok(ChunkOutputs { chunk, methods })
+        Ok(outputs)
     }
 
     /// Decodes chunk [`Self::next_chunk`]'s outputs (computed by [`Self::run_chunk`] here or

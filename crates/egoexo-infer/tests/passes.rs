@@ -216,11 +216,9 @@ fn chunks_computed_elsewhere_in_any_order_decode_to_the_sequential_result() {
         .chunk_windows(0)
         .map(|w| coordinator.run_window(&engine, &aligned, w, &mut StageTimer::off()).unwrap())
         .collect();
-    let mut first = egoexo_infer::ChunkOutputs { chunk: 0, methods: vec![Vec::new(); methods.len()] };
+    let mut first = egoexo_infer::ChunkOutputs::new(0, methods.len());
     for window in own {
-        for (list, output) in first.methods.iter_mut().zip(window) {
-            list.push(output);
-        }
+        first.push_window(window);
     }
     // Out of order: refused, nothing decoded.
     let last = egoexo_infer::ChunkOutputs::from_bytes(&arrived[0]).unwrap();

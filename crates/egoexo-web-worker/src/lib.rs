@@ -11,6 +11,8 @@
 //!   page ↔ worker protocol (`egoexo_protocol::worker`, `docs/worker-protocol.md`), model
 //!   fetching with the Cache API, cooperative cancel between windows, panic reporting.
 //!
+//! - [`pool`] — a pool of workers sharing one reconstruction: the session handed to helpers,
+//!   chunk sizes, and [`pool::ChunkSchedule`] (who computes which chunk; decoding in order).
 //! - [`bench`] — the bench page's network probe (`NetworkBench` in JS): one network on
 //!   deterministic inputs, its FLOPs and a matrix-product probe, timed by the page.
 //! - [`live`] — [`live::LiveReconstructor`]: a take streaming in from the live relay,
@@ -23,6 +25,7 @@
 
 pub mod bench;
 pub mod live;
+pub mod pool;
 #[cfg(target_arch = "wasm32")]
 mod runtime;
 pub mod scene;
@@ -31,4 +34,6 @@ pub mod xr;
 
 #[cfg(target_arch = "wasm32")]
 pub use runtime::{MODEL_CACHE, TEST_PANIC_MESSAGE, WorkerApp};
-pub use worker::{ExportedFile, JobProgress, ReconstructionTask, SessionWorker, WorkerClock, WorkerError};
+pub use worker::{
+    ExportedFile, JobProgress, PoolHelperJob, ReconstructionTask, SessionWorker, WorkerClock, WorkerError,
+};

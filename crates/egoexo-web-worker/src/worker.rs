@@ -16,8 +16,8 @@ use egoexo_core::{SmplMotion, TrackingMode};
 use egoexo_infer::manifest::Manifest;
 use egoexo_infer::models::{Loading, ModelSet};
 use egoexo_infer::{
-    InferError, LoadedModels, Method, NetworkRuns, ReconstructOptions, Reconstruction, ReconstructionJob, Stage,
-    StageTimer, StageTimings, TimedStage,
+    ChunkOutputs, Engine, InferError, LoadedModels, Method, NetworkRuns, Progress, ReconstructOptions, Reconstruction,
+    ReconstructionJob, Stage, StageTimer, StageTimings, TimedStage,
 };
 use egoexo_motion_io::{ExportError, Format};
 use egoexo_protocol::worker::{
@@ -64,6 +64,8 @@ pub enum WorkerError {
     Take(#[from] egoexo_session::live::TakeError),
     #[error("cannot write the session: {0}")]
     SaveSession(String),
+    #[error(transparent)]
+    Pool(#[from] crate::pool::PoolError),
 }
 
 impl WorkerError {
@@ -81,6 +83,7 @@ impl WorkerError {
             WorkerError::ShareRecording(_) | WorkerError::SaveSession(_) => ErrorKind::Export,
             WorkerError::Live(_) => ErrorKind::Reconstruct,
             WorkerError::Take(_) => ErrorKind::Import,
+            WorkerError::Pool(_) => ErrorKind::Reconstruct,
         }
     }
 
@@ -149,6 +152,65 @@ pub struct JobProgress {
 pub struct ReconstructionTask {
     job: ReconstructionJob,
     runs_before: NetworkRuns,
+    /// The network runs of the chunks pool helpers computed.
+    helper_runs: NetworkRuns,
+}
+
+impl ReconstructionTask {
+    /// Chunks of the job (see [`crate::pool`]).
+    pub fn chunk_count(&self) -> usize {
+        self.job.chunk_count()
+    }
+
+    /// Window indices of chunk `chunk`.
+    pub fn chunk_windows(&self, chunk: usize) -> std::ops::Range<usize> {
+        self.job.chunk_windows(chunk)
+    }
+
+    /// Windows per chunk.
+    pub fn chunk_size(&self) -> usize {
+        self.job.chunk_windows(0).len()
+    }
+
+    /// Sets the windows per chunk (≥ 1) before the first step: the result does not depend
+    /// on it.
+    pub fn set_chunk_size(&mut self, windows: usize) -> Result<(), WorkerError> {
+        Ok(self.job.set_chunk(windows)?)
+    }
+
+    /// Methods of the job (outputs per window).
+    pub fn method_count(&self) -> usize {
+        self.job.methods().len()
+    }
+}
+
+/// A pool helper's copy of a coordinator's job ([`SessionWorker::start_pool_helper`]): the
+/// same aligned session, methods and chunks, computed chunk by chunk on request.
+#[derive(Debug)]
+pub struct PoolHelperJob {
+    job: ReconstructionJob,
+    aligned: AlignedSession,
+}
+
+impl PoolHelperJob {
+    /// Chunks of the job.
+    pub fn chunk_count(&self) -> usize {
+        self.job.chunk_count()
+    }
+}
+
+/// The methods of a job: ego-exo, and the ego-only overlay when asked for.
+fn job_methods(ego_only_overlay: bool) -> &'static [Method] {
+    if ego_only_overlay { &[Method::EgoExo, Method::EgoOnly] } else { &[Method::EgoExo] }
+}
+
+/// The protocol's stage of an engine stage.
+fn job_stage(stage: Stage) -> JobStage {
+    match stage {
+        Stage::Ego => JobStage::EgoPass,
+        Stage::Fusion(Method::EgoOnly) => JobStage::EgoOnlyOverlay,
+        Stage::Fusion(_) => JobStage::ExoFusion,
+    }
 }
 
 /// A clock in milliseconds (any origin) handed to the worker by its host: the page glue's
@@ -354,15 +416,82 @@ impl SessionWorker {
             open.timings = StageTimings::default();
         }
         self.results = None;
-        let methods: &[Method] = if ego_only_overlay { &[Method::EgoExo, Method::EgoOnly] } else { &[Method::EgoExo] };
-        let options = ReconstructOptions::default();
-        let job = engine.start(&open.aligned, &options, methods)?;
-        // The mode's networks are parsed and optimised here, not inside the first window's
-        // stage timings.
-        if let Some(set) = engine.models(job.plan().tracking) {
-            set.prepare()?;
-        }
-        Ok(ReconstructionTask { job, runs_before: engine.network_runs() })
+        let job = start_job(engine, &open.aligned, ego_only_overlay)?;
+        Ok(ReconstructionTask { job, runs_before: engine.network_runs(), helper_runs: NetworkRuns::default() })
+    }
+
+    /// [`Self::start_reconstruction`] for a pool of `workers` workers (this one and
+    /// `workers − 1` helpers): chunks of [`crate::pool::pool_chunk_windows`] windows, which
+    /// the helpers compute from [`Self::pool_session`] and this worker decodes in order with
+    /// [`Self::add_pool_chunk`].
+    pub fn start_pooled_reconstruction(
+        &mut self,
+        ego_only_overlay: bool,
+        workers: usize,
+    ) -> Result<ReconstructionTask, WorkerError> {
+        let mut task = self.start_reconstruction(ego_only_overlay)?;
+        let windows = task.job.plan().windows.len();
+        task.job.set_chunk(crate::pool::pool_chunk_windows(windows, workers))?;
+        Ok(task)
+    }
+
+    /// The open session as the pool's helpers receive it ([`crate::pool::encode_pool_session`]).
+    pub fn pool_session(&self) -> Result<Vec<u8>, WorkerError> {
+        let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
+        Ok(crate::pool::encode_pool_session(&open.aligned)?)
+    }
+
+    /// Every method's output for window `window` of `task` (the coordinator's own share of a
+    /// pooled job, one window per step), timed into the task's stage timings with a clock.
+    pub fn run_pool_window(
+        &self,
+        task: &mut ReconstructionTask,
+        window: usize,
+    ) -> Result<Vec<egoexo_infer::passes::WindowOutput>, WorkerError> {
+        let engine = self.models.as_ref().ok_or(WorkerError::NoModels)?.offline();
+        let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
+        Ok(if self.clock.is_set() {
+            let mut now = self.clock.now_fn();
+            task.job.run_window_timed(engine, &open.aligned, window, &mut now)?
+        } else {
+            task.job.run_window(engine, &open.aligned, window, &mut StageTimer::off())?
+        })
+    }
+
+    /// Decodes the next chunk of a pooled `task` (computed here or by a helper; a helper's
+    /// network runs count in the summary).
+    pub fn add_pool_chunk(
+        &self,
+        task: &mut ReconstructionTask,
+        outputs: &ChunkOutputs,
+    ) -> Result<JobProgress, WorkerError> {
+        let Progress { stage, .. } = task.job.add_chunk(outputs)?;
+        task.helper_runs = task.helper_runs + outputs.runs;
+        Ok(JobProgress { stage: job_stage(stage), done: task.job.done_steps(), total: task.job.total_steps() })
+    }
+
+    /// A helper's copy of a coordinator's pooled job: the session from
+    /// [`Self::pool_session`]'s bytes, the same methods and `chunk_windows` windows per chunk.
+    pub fn start_pool_helper(
+        &self,
+        session: &[u8],
+        ego_only_overlay: bool,
+        chunk_windows: usize,
+    ) -> Result<PoolHelperJob, WorkerError> {
+        let engine = self.models.as_ref().ok_or(WorkerError::NoModels)?.offline();
+        let aligned = crate::pool::decode_pool_session(session)?;
+        let mut job = start_job(engine, &aligned, ego_only_overlay)?;
+        job.set_chunk(chunk_windows)?;
+        Ok(PoolHelperJob { job, aligned })
+    }
+
+    /// Chunk `chunk` of a helper's job, as the bytes the coordinator decodes.
+    pub fn run_pool_chunk(&self, helper: &PoolHelperJob, chunk: usize) -> Result<Vec<u8>, WorkerError> {
+        let engine = self.models.as_ref().ok_or(WorkerError::NoModels)?.offline();
+        let before = engine.network_runs();
+        let mut outputs = helper.job.run_chunk(engine, &helper.aligned, chunk)?;
+        outputs.runs = engine.network_runs() - before;
+        Ok(outputs.to_bytes()?)
     }
 
     /// Runs the next window of `task`; `None` when every pass is done.
@@ -376,11 +505,7 @@ impl SessionWorker {
             task.job.step(engine, &open.aligned)?
         };
         let Some(progress) = progress else { return Ok(None) };
-        let stage = match progress.stage {
-            Stage::Ego => JobStage::EgoPass,
-            Stage::Fusion(Method::EgoOnly) => JobStage::EgoOnlyOverlay,
-            Stage::Fusion(_) => JobStage::ExoFusion,
-        };
+        let stage = job_stage(progress.stage);
         Ok(Some(JobProgress { stage, done: task.job.done_steps(), total: task.job.total_steps() }))
     }
 
@@ -390,7 +515,7 @@ impl SessionWorker {
         let engine = self.models.as_ref().ok_or(WorkerError::NoModels)?.offline();
         let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
         let windows = task.job.plan().windows.len();
-        let runs = engine.network_runs() - task.runs_before;
+        let runs = (engine.network_runs() - task.runs_before) + task.helper_runs;
         let (reconstructions, mut timings) = if self.clock.is_set() {
             let mut now = self.clock.now_fn();
             task.job.finish_timed(&open.aligned, &mut now)?
@@ -571,6 +696,21 @@ pub fn motion_format(format: ExportFormat) -> Format {
         ExportFormat::Glb => Format::Glb,
         ExportFormat::Csv => Format::Csv,
     }
+}
+
+/// The worker's job on `aligned` (the same for the page's worker and a pool's helpers), its
+/// tracking mode's networks parsed and optimised now rather than inside the first window's
+/// stage timings.
+fn start_job(
+    engine: &Engine,
+    aligned: &AlignedSession,
+    ego_only_overlay: bool,
+) -> Result<ReconstructionJob, WorkerError> {
+    let job = engine.start(aligned, &ReconstructOptions::default(), job_methods(ego_only_overlay))?;
+    if let Some(set) = engine.models(job.plan().tracking) {
+        set.prepare()?;
+    }
+    Ok(job)
 }
 
 fn align_for(imported: &Imported, fps: f32) -> Result<AlignedSession, WorkerError> {

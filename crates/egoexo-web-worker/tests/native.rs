@@ -457,3 +457,68 @@ fn a_packed_share_opens_elsewhere_with_the_same_scene_exports_and_recording() {
     let err = other.open_share(b"PK not really".to_vec()).unwrap_err();
     assert_eq!(err.kind(), ErrorKind::ShareInvalid);
 }
+
+/// A pool of two: the coordinator and one helper, driven the way the wasm message loop
+/// drives them (the helper answers one step late, so chunks arrive out of order), with the
+/// helper failing on its second chunk.
+#[test]
+fn a_pool_of_workers_reconstructs_exactly_what_one_worker_does() {
+    use egoexo_infer::ChunkOutputs;
+    use egoexo_web_worker::pool::ChunkSchedule;
+
+    let (single, _) = reconstructed();
+    let mut coordinator = worker_with_models();
+    coordinator.import_archive(SESSION_NAME, SESSION.to_vec()).unwrap();
+    let helper = worker_with_models();
+    let mut task = coordinator.start_pooled_reconstruction(true, 2).unwrap();
+    task.set_chunk_size(1).unwrap();
+    let chunks = task.chunk_count();
+    assert!(chunks >= 3, "{chunks} chunks");
+    let session = coordinator.pool_session().unwrap();
+    let helper_job = helper.start_pool_helper(&session, true, task.chunk_size()).unwrap();
+    assert_eq!(helper_job.chunk_count(), chunks);
+    // Bytes that are not a session: a clear error.
+    let err = helper.start_pool_helper(&session[..session.len() / 2], true, 1).unwrap_err();
+    assert!(err.to_string().contains("not an aligned session"), "{err}");
+
+    let mut schedule = ChunkSchedule::new(chunks);
+    let (mut in_flight, mut helper_chunks, mut progress) = (None::<Vec<u8>>, 0, Vec::new());
+    while !schedule.is_done() {
+        if let Some(bytes) = in_flight.take() {
+            let outputs = ChunkOutputs::from_bytes(&bytes).unwrap();
+            assert!(schedule.finished(Some(0), outputs));
+        }
+        if let Some(chunk) = schedule.assign(0) {
+            helper_chunks += 1;
+            if helper_chunks == 2 {
+                schedule.helper_failed(0);
+            } else {
+                in_flight = Some(helper.run_pool_chunk(&helper_job, chunk).unwrap());
+            }
+        }
+        if let Some(chunk) = schedule.take_own() {
+            let mut own = ChunkOutputs::new(chunk, task.method_count());
+            for window in task.chunk_windows(chunk) {
+                own.push_window(coordinator.run_pool_window(&mut task, window).unwrap());
+            }
+            assert!(schedule.finished(None, own));
+        }
+        while let Some(outputs) = schedule.next_to_decode() {
+            progress.push(coordinator.add_pool_chunk(&mut task, &outputs).unwrap());
+        }
+    }
+    assert_eq!(schedule.failed_helpers(), 1);
+    assert_eq!(progress.len(), chunks);
+    assert!(progress.windows(2).all(|p| p[0].done < p[1].done));
+    let last = progress.last().unwrap();
+    assert_eq!(last.done, last.total);
+    let summary = coordinator.finish_reconstruction(task).unwrap();
+    // The same numbers, bit for bit, and every network run counted once wherever it ran.
+    assert_eq!(coordinator.scene_json().unwrap(), single.scene_json().unwrap());
+    for format in ExportFormat::ALL {
+        assert_eq!(coordinator.export(format).unwrap(), single.export(format).unwrap(), "{format:?}");
+    }
+    let expected = single.reconstruction_summary().unwrap();
+    assert_eq!(summary.network_runs, expected.network_runs);
+    assert_eq!(summary.windows, expected.windows);
+}

@@ -80,7 +80,11 @@ const STAGE_TITLES = {
 };
 
 function spawnWorker() {
-  const worker = new Worker(new URL('worker.js', import.meta.url), { type: 'module' });
+  // `?workers=N` on the page sizes the worker's pool (docs/worker-protocol.md).
+  const workerUrl = new URL('worker.js', import.meta.url);
+  const pageWorkers = new URLSearchParams(location.search).get('workers');
+  if (pageWorkers) workerUrl.searchParams.set('workers', pageWorkers);
+  const worker = new Worker(workerUrl, { type: 'module' });
   const client = new WorkerClient(worker);
   // A replaced (crashed) worker's last messages may still be queued: ignore them.
   worker.onmessage = (event) => {

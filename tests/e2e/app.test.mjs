@@ -269,6 +269,49 @@ describe('bad input and failures', () => {
     }
   });
 
+  test('a pool of two workers reconstructs the sample byte for byte as one worker does', async () => {
+    // The npz export and the summary of the sample with `workers` workers. A short session's
+    // first job leaves the helpers for later (they start once it is done), so with a pool the
+    // sample runs again until the helper has computed chunks of a job (at most `runs` times).
+    const reconstruct = async (workers, runs) => {
+      const app = await openApp(browser, `?backend=webgl2&workers=${workers}`);
+      try {
+        assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
+        const summaries = [];
+        for (let run = 0; run < runs; run++) {
+          // The state is `ready` from the last run until the click takes effect.
+          await app.page.evaluate(() => {
+            document.body.dataset.state = 'clicked';
+            document.getElementById('sample-button').click();
+          });
+          assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
+          summaries.push(await app.page.evaluate(() => window.egoexo.summary));
+          if (summaries.at(-1).pool?.helper_chunks > 0) break;
+        }
+        const [download] = await Promise.all([app.page.waitForEvent('download'), app.page.click('[data-format=npz]')]);
+        const path = join(OUT, `pool-${workers}.npz`);
+        await download.saveAs(path);
+        assert.deepEqual(app.errors, []);
+        return { npz: readFileSync(path), summaries };
+      } finally {
+        await app.close();
+      }
+    };
+    const one = await reconstruct(1, 1);
+    const two = await reconstruct(2, 6);
+    assert.equal(one.summaries[0].pool, undefined, JSON.stringify(one.summaries[0]));
+    assert.equal(two.summaries[0].pool, undefined, 'the first job of a short session runs in one worker');
+    const last = two.summaries.at(-1);
+    const pool = last.pool;
+    assert.ok(pool, JSON.stringify(two.summaries));
+    assert.equal(pool.workers, 2);
+    assert.equal(pool.failed_helpers, 0);
+    assert.ok(pool.chunks >= 2 && pool.helper_chunks > 0 && pool.helper_chunks <= pool.chunks, JSON.stringify(pool));
+    console.log(`# pool of 2 (job ${two.summaries.length}): ${pool.helper_chunks} of ${pool.chunks} chunks (${pool.chunk_windows} windows each) computed by the helper`);
+    assert.deepEqual(last.network_runs, one.summaries[0].network_runs);
+    assert.ok(one.npz.equals(two.npz), 'the pooled reconstruction differs from the single worker\'s');
+  });
+
   test('a worker panic is caught, reported, and the worker replaced', async () => {
     const app = await openApp(browser, '?backend=webgl2');
     try {

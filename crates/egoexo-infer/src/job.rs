@@ -289,7 +289,8 @@ impl ReconstructionJob {
         }
         self.chunk_start = windows.end;
         self.steps += windows.len() * (1 + self.methods.len());
-        let stage = self.methods.last().map_or(Stage::Ego, |&m| Stage::Fusion(m));
+        // A chunk ran every pass: its progress names the first method's (the result's) fusion.
+        let stage = self.methods.first().map_or(Stage::Ego, |&m| Stage::Fusion(m));
         Ok(Progress { stage, done: windows.end, total: self.plan.windows.len() })
     }
 

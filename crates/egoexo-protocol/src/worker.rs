@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 
 /// The protocol's version; the worker says it in [`WorkerEvent::Ready`], and the page refuses
 /// a worker that speaks another.
-pub const WORKER_PROTOCOL_VERSION: u32 = 3;
+pub const WORKER_PROTOCOL_VERSION: u32 = 4;
 
 /// A job's number, chosen by the page (unique per worker).
 pub type JobId = u32;
@@ -67,6 +67,14 @@ pub enum WorkerRequest<B> {
     SaveSession { job: JobId },
     /// Panic inside the worker's Rust code (tests of the page's crash handling).
     PanicForTest,
+    /// Pool coordinator → helper (a nested worker of the page's worker; "The worker pool"
+    /// in the docs): make job `job` — the aligned session `session` (MessagePack, from the
+    /// coordinator), ego-exo and with `overlay` the ego-only overlay, `chunk_windows`
+    /// windows per chunk — replacing any pool job held. Answered by `pool-ready` or `error`.
+    PoolJob { job: JobId, session: B, overlay: bool, chunk_windows: usize },
+    /// Pool coordinator → helper: compute chunk `chunk` of pool job `job`. Answered by
+    /// `pool-chunk-done` or `error`; `cancel` drops it while queued.
+    PoolChunk { job: JobId, chunk: usize },
 }
 
 impl<B> WorkerRequest<B> {
@@ -79,7 +87,9 @@ impl<B> WorkerRequest<B> {
             | WorkerRequest::CreateShare { job, .. }
             | WorkerRequest::OpenShare { job, .. }
             | WorkerRequest::LiveStop { job, .. }
-            | WorkerRequest::SaveSession { job } => Some(*job),
+            | WorkerRequest::SaveSession { job }
+            | WorkerRequest::PoolJob { job, .. }
+            | WorkerRequest::PoolChunk { job, .. } => Some(*job),
             WorkerRequest::WarmUp
             | WorkerRequest::Cancel { .. }
             | WorkerRequest::PanicForTest
@@ -96,6 +106,7 @@ impl<B> WorkerRequest<B> {
                 files.iter().map(|f| &f.bytes).collect()
             }
             WorkerRequest::OpenShare { sealed, .. } => vec![sealed],
+            WorkerRequest::PoolJob { session, .. } => vec![session],
             _ => Vec::new(),
         }
     }
@@ -129,6 +140,10 @@ impl<B> WorkerRequest<B> {
             WorkerRequest::LiveLookahead { frames } => WorkerRequest::LiveLookahead { frames },
             WorkerRequest::LiveStop { job, keep, name } => WorkerRequest::LiveStop { job, keep, name },
             WorkerRequest::SaveSession { job } => WorkerRequest::SaveSession { job },
+            WorkerRequest::PoolJob { job, session, overlay, chunk_windows } => {
+                WorkerRequest::PoolJob { job, session: f(session)?, overlay, chunk_windows }
+            }
+            WorkerRequest::PoolChunk { job, chunk } => WorkerRequest::PoolChunk { job, chunk },
         })
     }
 }
@@ -259,6 +274,11 @@ pub enum WorkerEvent<B> {
     },
     /// The worker's Rust code panicked: the module is dead and the worker must be replaced.
     Panic { message: String },
+    /// Pool helper → coordinator: pool job `job` is made; it takes `pool-chunk` requests.
+    PoolReady { job: JobId },
+    /// Pool helper → coordinator: chunk `chunk` of pool job `job`, its window outputs
+    /// (`egoexo_infer::ChunkOutputs` as postcard bytes).
+    PoolChunkDone { job: JobId, chunk: usize, outputs: B },
 }
 
 impl<B> WorkerEvent<B> {
@@ -272,7 +292,9 @@ impl<B> WorkerEvent<B> {
             | WorkerEvent::ShareSealed { job, .. }
             | WorkerEvent::ShareOpened { job, .. }
             | WorkerEvent::Cancelled { job }
-            | WorkerEvent::LiveKept { job, .. } => Some(*job),
+            | WorkerEvent::LiveKept { job, .. }
+            | WorkerEvent::PoolReady { job }
+            | WorkerEvent::PoolChunkDone { job, .. } => Some(*job),
             WorkerEvent::Error { job, .. } => *job,
             WorkerEvent::LiveJoined { .. }
             | WorkerEvent::LiveStatus { .. }
@@ -293,6 +315,7 @@ impl<B> WorkerEvent<B> {
             WorkerEvent::ShareSealed { sealed, .. } => vec![sealed],
             WorkerEvent::ShareOpened { scene, .. } => vec![scene],
             WorkerEvent::LiveFrame { scene, .. } => vec![scene],
+            WorkerEvent::PoolChunkDone { outputs, .. } => vec![outputs],
             _ => Vec::new(),
         }
     }
@@ -331,6 +354,10 @@ impl<B> WorkerEvent<B> {
             WorkerEvent::LiveFrame { scene, frame } => WorkerEvent::LiveFrame { scene: f(scene)?, frame },
             WorkerEvent::LiveClosed { code, reason } => WorkerEvent::LiveClosed { code, reason },
             WorkerEvent::LiveKept { job, summary, take } => WorkerEvent::LiveKept { job, summary, take },
+            WorkerEvent::PoolReady { job } => WorkerEvent::PoolReady { job },
+            WorkerEvent::PoolChunkDone { job, chunk, outputs } => {
+                WorkerEvent::PoolChunkDone { job, chunk, outputs: f(outputs)? }
+            }
         })
     }
 }
@@ -611,6 +638,23 @@ pub struct ReconstructionSummary {
     /// session, the engine's stages, the scene); empty when the worker has no clock.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub timings: Vec<StageTiming>,
+    /// How a pool of workers shared the job; absent when one worker ran it all.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pool: Option<PoolSummary>,
+}
+
+/// How a pool of workers shared a reconstruction ([`ReconstructionSummary::pool`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PoolSummary {
+    /// Workers in the pool, the page's worker (the coordinator) included.
+    pub workers: usize,
+    /// Chunks of `chunk_windows` windows in the job.
+    pub chunks: usize,
+    pub chunk_windows: usize,
+    /// Chunks the helpers computed (the coordinator computed the rest).
+    pub helper_chunks: usize,
+    /// Helpers that failed during the job (their chunks were computed again elsewhere).
+    pub failed_helpers: usize,
 }
 
 /// One stage's time in a job ([`ReconstructionSummary::timings`]).

@@ -41,11 +41,15 @@ pub fn decode_pool_session(bytes: &[u8]) -> Result<AlignedSession, PoolError> {
 }
 
 /// Windows per chunk when `workers` workers share a job of `windows` windows: about four
-/// chunks per worker, so that the last chunks finish close together, but at least 4 windows
-/// (a chunk's round trip costs a message each way) and at most [`WINDOW_CHUNK`].
+/// chunks per worker, so that the last chunks finish close together, but at least 2 windows
+/// (a chunk's round trip costs a message each way, well under a window's time) and at most
+/// [`WINDOW_CHUNK`].
 pub fn pool_chunk_windows(windows: usize, workers: usize) -> usize {
-    (windows / (4 * workers.max(1))).clamp(4, WINDOW_CHUNK)
+    (windows / (4 * workers.max(1))).clamp(MIN_POOL_CHUNK, WINDOW_CHUNK)
 }
+
+/// The fewest windows in a pooled chunk.
+pub const MIN_POOL_CHUNK: usize = 2;
 
 /// Who computes which chunk of a pooled job, and the finished chunks waiting for their turn
 /// to be decoded. Helpers are numbered by the coordinator (`0..`); the coordinator itself
@@ -173,10 +177,11 @@ mod tests {
 
     #[test]
     fn chunks_are_small_enough_to_share_and_large_enough_to_pay_for_a_message() {
-        assert_eq!(pool_chunk_windows(24, 2), 4);
+        assert_eq!(pool_chunk_windows(24, 2), 3);
+        assert_eq!(pool_chunk_windows(10, 4), MIN_POOL_CHUNK);
         assert_eq!(pool_chunk_windows(2_300, 2), WINDOW_CHUNK);
         assert_eq!(pool_chunk_windows(200, 2), 25);
-        assert_eq!(pool_chunk_windows(0, 0), 4);
+        assert_eq!(pool_chunk_windows(0, 0), MIN_POOL_CHUNK);
     }
 
     #[test]

@@ -16,18 +16,23 @@
 //!   in the layout of `egoexo_share::envelope`, under a key drawn with
 //!   `crypto.getRandomValues`; the key goes back to the page for the link and nowhere else;
 //! - events ([`WorkerEvent`]) are posted with their byte buffers transferred, not copied;
-//! - a Rust panic is reported as a `panic` event (and on the console) before the module dies.
+//! - a Rust panic is reported as a `panic` event (and on the console) before the module dies;
+//! - with a pool (the glue's `pool` object: `size` helpers, `start()` to spawn them, `post(i,
+//!   message, transfer)`), a reconstruction's chunks are shared with helper workers — the
+//!   same module, spawned by the glue once the models are in the cache — and decoded here in
+//!   order ([`crate::pool`]); a helper's messages come in through `handle_helper`. A helper
+//!   answers `pool-job` and `pool-chunk` requests from its coordinator.
 
 use std::cell::{Cell, RefCell};
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::rc::Rc;
 
-use egoexo_infer::InferError;
+use egoexo_infer::{ChunkOutputs, InferError};
 use egoexo_protocol::JsBytes;
-use egoexo_protocol::js::request_from_js;
+use egoexo_protocol::js::{event_from_js, request_from_js};
 use egoexo_protocol::worker::{
-    ErrorKind, ErrorStage, ExportFormat, ExportedFile, JobId, JobStage, ModelFileRef, ModelsSummary, SessionInput,
-    WORKER_PROTOCOL_VERSION, WorkerEvent, WorkerRequest,
+    ErrorKind, ErrorStage, ExportFormat, ExportedFile, JobId, JobStage, ModelFileRef, ModelsSummary, PoolSummary,
+    SessionInput, WORKER_PROTOCOL_VERSION, WorkerEvent, WorkerRequest,
 };
 use js_sys::{Array, Promise, Uint8Array};
 use wasm_bindgen::JsCast;
@@ -39,7 +44,8 @@ use egoexo_share::envelope;
 use egoexo_share::{ShareError, ShareKey};
 use web_sys::{AesGcmParams, Crypto, CryptoKey, SubtleCrypto};
 
-use crate::worker::{SessionWorker, WorkerClock, WorkerError};
+use crate::pool::ChunkSchedule;
+use crate::worker::{PoolHelperJob, ReconstructionTask, SessionWorker, WorkerClock, WorkerError};
 
 type Request = WorkerRequest<JsBytes>;
 type Event = WorkerEvent<JsBytes>;
@@ -56,6 +62,11 @@ async fn yield_on(channel: &MessageChannel) {
     });
     let _ = JsFuture::from(tick).await;
 }
+
+/// Sessions of at least this many frames (100 s at 30 fps; over a second of one worker's
+/// time) start the pool's helpers for their own reconstruction; shorter ones leave that
+/// until the worker is idle.
+const POOL_EAGER_FRAMES: usize = 3_000;
 
 /// The Cache API cache holding the model files.
 pub const MODEL_CACHE: &str = "egoexo-models";
@@ -84,8 +95,15 @@ impl WorkerApp {
     /// `clock` (optional) returns the time in Unix milliseconds (`performance.timeOrigin +
     /// performance.now()`); the live connection answers the relay's clock pings with it, and
     /// each reconstruction's summary reports its time per stage with it.
+    ///
+    /// `pool` (optional, the page's worker only) is the glue's pool of helper workers:
+    /// `{size, start(), post(i, message, transfer)}`.
     #[wasm_bindgen(constructor)]
-    pub fn new(models_url: &str, clock: Option<js_sys::Function>) -> Result<WorkerApp, JsValue> {
+    pub fn new(
+        models_url: &str,
+        clock: Option<js_sys::Function>,
+        pool: Option<js_sys::Object>,
+    ) -> Result<WorkerApp, JsValue> {
         let scope: DedicatedWorkerGlobalScope = js_sys::global().dyn_into()?;
         let models_url = Url::new_with_base(models_url, &scope.location().href())?.href();
         install_panic_reporter();
@@ -107,6 +125,12 @@ impl WorkerApp {
             channel: MessageChannel::new()?,
             live: RefCell::new(None),
             clock,
+            pool: pool.map(|p| PoolGlue::from_js(&p)).transpose()?.filter(|p| p.size > 0),
+            helpers_started: Cell::new(false),
+            dead_helpers: RefCell::new(BTreeSet::new()),
+            helper_inbox: RefCell::new(VecDeque::new()),
+            wake: RefCell::new(None),
+            pool_job: RefCell::new(None),
         });
         runtime.post(Event::Ready { protocol: WORKER_PROTOCOL_VERSION });
         Ok(WorkerApp { runtime })
@@ -142,7 +166,44 @@ impl WorkerApp {
             }
         }
     }
+
+    /// Handles one message from pool helper `helper` (`event.data`).
+    pub fn handle_helper(&self, helper: usize, message: JsValue) {
+        let event = event_from_js(&message);
+        self.runtime.helper_inbox.borrow_mut().push_back((helper, event.map_err(|e| e.to_string())));
+        self.runtime.wake();
+    }
+
+    /// Pool helper `helper` failed outside its Rust code (its script did not load, or it
+    /// threw): it gets no more work.
+    pub fn helper_failed(&self, helper: usize, message: String) {
+        self.runtime.helper_inbox.borrow_mut().push_back((helper, Err(message)));
+        self.runtime.wake();
+    }
 }
+
+/// The glue's pool of helper workers (see [`WorkerApp::new`]).
+#[derive(Debug)]
+struct PoolGlue {
+    /// Helpers in the pool (the coordinator not counted).
+    size: usize,
+    start: js_sys::Function,
+    post: js_sys::Function,
+}
+
+impl PoolGlue {
+    fn from_js(pool: &js_sys::Object) -> Result<Self, JsValue> {
+        let get = |name: &str| js_sys::Reflect::get(pool, &JsValue::from_str(name));
+        let size = get("size")?.as_f64().unwrap_or(0.0).max(0.0) as usize;
+        let function = |name: &str| -> Result<js_sys::Function, JsValue> {
+            get(name)?.dyn_into().map_err(|_| JsValue::from_str(&format!("pool.{name} is not a function")))
+        };
+        Ok(PoolGlue { size, start: function("start")?, post: function("post")? })
+    }
+}
+
+/// A message from a helper: its event, or why it could not be read or the helper failed.
+type HelperMessage = (usize, Result<Event, String>);
 
 #[derive(Debug)]
 struct Runtime {
@@ -163,6 +224,18 @@ struct Runtime {
     live: RefCell<Option<live::LiveConnection>>,
     /// The page glue's clock (Unix ms), for the relay's clock pings.
     clock: Option<js_sys::Function>,
+    /// The pool of helper workers, when this is the page's worker and the glue made one.
+    pool: Option<PoolGlue>,
+    /// Whether the glue has spawned the helpers (once the models are cached).
+    helpers_started: Cell<bool>,
+    /// Helpers that panicked or failed to start: never used again.
+    dead_helpers: RefCell<BTreeSet<usize>>,
+    /// Helpers' messages not yet read by the running reconstruction.
+    helper_inbox: RefCell<VecDeque<HelperMessage>>,
+    /// Resolves the promise a pooled reconstruction waits on for a helper's message.
+    wake: RefCell<Option<js_sys::Function>>,
+    /// As a helper: the coordinator's job held.
+    pool_job: RefCell<Option<(JobId, PoolHelperJob)>>,
 }
 
 /// Why loading the models failed.
@@ -192,6 +265,7 @@ impl Runtime {
     fn cancel(&self, job: JobId) {
         if self.current.get() == Some(job) {
             self.cancel_requested.set(true);
+            self.wake();
             return;
         }
         let mut queue = self.queue.borrow_mut();
@@ -243,6 +317,30 @@ impl Runtime {
         match request {
             WorkerRequest::Open { job, input } => self.open(job, input),
             WorkerRequest::Reconstruct { job, overlay } => self.reconstruct(job, overlay).await,
+            WorkerRequest::PoolJob { job, session, overlay, chunk_windows } => {
+                let made = self.worker.borrow().start_pool_helper(&session.to_vec(), overlay, chunk_windows);
+                match made {
+                    Ok(helper_job) => {
+                        *self.pool_job.borrow_mut() = Some((job, helper_job));
+                        self.post(Event::PoolReady { job });
+                    }
+                    Err(e) => self.fail(Some(job), ErrorStage::Reconstruct, &e),
+                }
+            }
+            WorkerRequest::PoolChunk { job, chunk } => {
+                let computed = match &*self.pool_job.borrow() {
+                    Some((held, helper_job)) if *held == job => self.worker.borrow().run_pool_chunk(helper_job, chunk),
+                    held => Err(crate::pool::PoolError::NoJob {
+                        job,
+                        held: held.as_ref().map_or("none".into(), |(j, _)| format!("job {j}")),
+                    }
+                    .into()),
+                };
+                match computed {
+                    Ok(bytes) => self.post(Event::PoolChunkDone { job, chunk, outputs: JsBytes::copy_from(&bytes) }),
+                    Err(e) => self.fail(Some(job), ErrorStage::Reconstruct, &e),
+                }
+            }
             WorkerRequest::Export { job, format } => self.export(job, format),
             WorkerRequest::CreateShare { job, include_recording } => {
                 let result = self.create_share(job, include_recording).await;
@@ -304,28 +402,35 @@ impl Runtime {
     }
 
     async fn reconstruct(&self, job: JobId, overlay: bool) {
-        let started = self.worker.borrow_mut().start_reconstruction(overlay);
+        self.reconstruct_job(job, overlay).await;
+        // Idle after the first job: the helpers start for the next ones.
+        self.start_helpers();
+    }
+
+    async fn reconstruct_job(&self, job: JobId, overlay: bool) {
+        let frames = self.worker.borrow().aligned_session().map_or(0, |a| a.timeline.frames);
+        if frames >= POOL_EAGER_FRAMES {
+            self.start_helpers();
+        }
+        let helpers = self.live_helpers();
+        let started = if helpers.is_empty() {
+            self.worker.borrow_mut().start_reconstruction(overlay)
+        } else {
+            self.worker.borrow_mut().start_pooled_reconstruction(overlay, helpers.len() + 1)
+        };
         let mut task = match started {
             Ok(task) => task,
             Err(e) => return self.fail(Some(job), ErrorStage::Reconstruct, &e),
         };
-        loop {
-            if self.stopped(job) {
-                return;
-            }
-            let step = self.worker.borrow().step_reconstruction(&mut task);
-            match step {
-                Ok(Some(p)) => self.post(Event::Progress {
-                    job,
-                    stage: p.stage,
-                    label: p.stage.label().into(),
-                    done: p.done,
-                    total: p.total,
-                }),
-                Ok(None) => break,
-                Err(e) => return self.fail(Some(job), ErrorStage::Reconstruct, &e),
-            }
-            self.yield_now().await;
+        let computed = if helpers.is_empty() || task.chunk_count() < 2 {
+            self.reconstruct_here(job, &mut task).await
+        } else {
+            self.reconstruct_pooled(job, overlay, &helpers, &mut task).await
+        };
+        match computed {
+            Ok(true) => {}
+            Ok(false) => return,
+            Err(e) => return self.fail(Some(job), ErrorStage::Reconstruct, &e),
         }
         if self.stopped(job) {
             return;
@@ -335,6 +440,195 @@ impl Runtime {
         match result {
             Ok((summary, scene)) => self.post(Event::Reconstructed { job, scene: JsBytes::copy_from(&scene), summary }),
             Err(e) => self.fail(Some(job), ErrorStage::Reconstruct, &e),
+        }
+    }
+
+    /// Every step of `task` here, one window per step; `Ok(false)` when cancelled.
+    async fn reconstruct_here(&self, job: JobId, task: &mut ReconstructionTask) -> Result<bool, WorkerError> {
+        loop {
+            if self.stopped(job) {
+                return Ok(false);
+            }
+            let step = self.worker.borrow().step_reconstruction(task)?;
+            match step {
+                Some(p) => self.post_progress(job, p),
+                None => return Ok(true),
+            }
+            self.yield_now().await;
+        }
+    }
+
+    fn post_progress(&self, job: JobId, p: crate::JobProgress) {
+        self.post(Event::Progress { job, stage: p.stage, label: p.stage.label().into(), done: p.done, total: p.total });
+    }
+
+    /// The helpers that may take work: none without a pool or before they are started.
+    fn live_helpers(&self) -> Vec<usize> {
+        let Some(pool) = self.pool.as_ref().filter(|_| self.helpers_started.get()) else { return Vec::new() };
+        let dead = self.dead_helpers.borrow();
+        (0..pool.size).filter(|i| !dead.contains(i)).collect()
+    }
+
+    /// Has the glue spawn the pool's helpers (once) and has them load their models (from the
+    /// cache, where this worker's are by now) and prepare the networks. Called when a job is
+    /// long enough to pay for it ([`POOL_EAGER_FRAMES`]) — they join that job as they become
+    /// ready — or once the first job is done, so that the start of the page (the time to the
+    /// first skeleton) never shares the two cores with compiling more workers.
+    fn start_helpers(&self) {
+        let Some(pool) = &self.pool else { return };
+        if self.helpers_started.replace(true) {
+            return;
+        }
+        if let Err(e) = pool.start.call0(&JsValue::UNDEFINED) {
+            console_error(&format!("egoexo worker: cannot start the pool's helpers: {}", js_message(&e)));
+            self.dead_helpers.borrow_mut().extend(0..pool.size);
+            return;
+        }
+        for helper in 0..pool.size {
+            self.post_to_helper(helper, &WorkerRequest::WarmUp);
+        }
+    }
+
+    /// Posts `request` to helper `helper`, its byte buffers transferred.
+    fn post_to_helper(&self, helper: usize, request: &Request) {
+        let Some(pool) = &self.pool else { return };
+        let transfer = Array::new();
+        for bytes in request.byte_buffers() {
+            transfer.push(&bytes.buffer());
+        }
+        let serializer = serde_wasm_bindgen::Serializer::json_compatible();
+        let posted = serde::Serialize::serialize(request, &serializer)
+            .map_err(|e| JsValue::from_str(&e.to_string()))
+            .and_then(|value| pool.post.call3(&JsValue::UNDEFINED, &JsValue::from(helper as u32), &value, &transfer));
+        if let Err(e) = posted {
+            console_error(&format!("egoexo worker: cannot post to helper {helper}: {}", js_message(&e)));
+            self.helper_inbox.borrow_mut().push_back((helper, Err("a request could not be posted to it".into())));
+        }
+    }
+
+    /// Wakes a pooled reconstruction waiting for a helper (a message or a cancel arrived).
+    fn wake(&self) {
+        if let Some(resolve) = self.wake.borrow_mut().take() {
+            let _ = resolve.call0(&JsValue::UNDEFINED);
+        }
+    }
+
+    /// Waits until a helper's message (or a cancel) arrives.
+    async fn wait_for_helper(&self) {
+        if !self.helper_inbox.borrow().is_empty() || self.cancel_requested.get() {
+            return;
+        }
+        let arrived = Promise::new(&mut |resolve, _reject| {
+            *self.wake.borrow_mut() = Some(resolve);
+        });
+        let _ = JsFuture::from(arrived).await;
+    }
+
+    /// Every chunk of `task`, shared with `helpers`: each gets the session and the job's
+    /// settings, then one chunk at a time once it says it is ready; this worker computes
+    /// chunks too, one window per step, and decodes every chunk in order as it comes in. A
+    /// helper that fails gives its chunk back and gets no more; `Ok(false)` when cancelled.
+    async fn reconstruct_pooled(
+        &self,
+        job: JobId,
+        overlay: bool,
+        helpers: &[usize],
+        task: &mut ReconstructionTask,
+    ) -> Result<bool, WorkerError> {
+        let session = self.worker.borrow().pool_session()?;
+        let chunk_windows = task.chunk_size();
+        self.helper_inbox.borrow_mut().retain(|(_, message)| message.is_err());
+        for &helper in helpers {
+            let session = JsBytes::copy_from(&session);
+            self.post_to_helper(helper, &WorkerRequest::PoolJob { job, session, overlay, chunk_windows });
+        }
+        drop(session);
+        let mut schedule = ChunkSchedule::new(task.chunk_count());
+        let mut ready = BTreeSet::new();
+        let mut own: Option<(ChunkOutputs, std::ops::Range<usize>)> = None;
+        let mut helper_chunks = 0;
+        loop {
+            if self.stopped(job) {
+                for &helper in helpers {
+                    self.post_to_helper(helper, &WorkerRequest::Cancel { job });
+                }
+                return Ok(false);
+            }
+            let arrived: Vec<HelperMessage> = self.helper_inbox.borrow_mut().drain(..).collect();
+            for (helper, message) in arrived {
+                match message {
+                    Ok(WorkerEvent::PoolReady { job: j }) if j == job => {
+                        ready.insert(helper);
+                    }
+                    Ok(WorkerEvent::PoolChunkDone { job: j, chunk, outputs }) if j == job => {
+                        match ChunkOutputs::from_bytes(&outputs.to_vec()) {
+                            Ok(outputs) if outputs.chunk == chunk => {
+                                helper_chunks += usize::from(schedule.finished(Some(helper), outputs));
+                            }
+                            _ => self.helper_lost(&mut schedule, helper, job, "sent outputs that do not decode", false),
+                        }
+                    }
+                    Ok(WorkerEvent::Error { job: j, message, .. }) if j == Some(job) || j.is_none() => {
+                        self.helper_lost(&mut schedule, helper, job, &message, false);
+                    }
+                    Ok(WorkerEvent::Panic { message }) => self.helper_lost(&mut schedule, helper, job, &message, true),
+                    Err(message) => self.helper_lost(&mut schedule, helper, job, &message, true),
+                    Ok(_) => {}
+                }
+            }
+            for &helper in &ready {
+                if self.dead_helpers.borrow().contains(&helper) {
+                    continue;
+                }
+                if let Some(chunk) = schedule.assign(helper) {
+                    self.post_to_helper(helper, &WorkerRequest::PoolChunk { job, chunk });
+                }
+            }
+            while let Some(outputs) = schedule.next_to_decode() {
+                let progress = self.worker.borrow().add_pool_chunk(task, &outputs)?;
+                self.post_progress(job, progress);
+            }
+            if schedule.is_done() {
+                break;
+            }
+            if own.is_none() {
+                own = schedule
+                    .take_own()
+                    .map(|chunk| (ChunkOutputs::new(chunk, task.method_count()), task.chunk_windows(chunk)));
+            }
+            match &mut own {
+                Some((outputs, windows)) => {
+                    if let Some(window) = windows.next() {
+                        let computed = self.worker.borrow().run_pool_window(task, window)?;
+                        outputs.push_window(computed);
+                    }
+                    if windows.start >= windows.end {
+                        if let Some((outputs, _)) = own.take() {
+                            schedule.finished(None, outputs);
+                        }
+                    }
+                    self.yield_now().await;
+                }
+                None => self.wait_for_helper().await,
+            }
+        }
+        task.set_pool_summary(PoolSummary {
+            workers: helpers.len() + 1,
+            chunks: task.chunk_count(),
+            chunk_windows,
+            helper_chunks,
+            failed_helpers: schedule.failed_helpers(),
+        });
+        Ok(true)
+    }
+
+    /// Helper `helper` failed during job `job`: its chunk goes back; after a panic (or when
+    /// its messages cannot be read) it is never used again.
+    fn helper_lost(&self, schedule: &mut ChunkSchedule, helper: usize, job: JobId, why: &str, dead: bool) {
+        console_error(&format!("egoexo worker: helper {helper} failed during job {job}: {why}"));
+        schedule.helper_failed(helper);
+        if dead {
+            self.dead_helpers.borrow_mut().insert(helper);
         }
     }
 

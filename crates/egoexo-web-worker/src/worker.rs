@@ -154,6 +154,8 @@ pub struct ReconstructionTask {
     runs_before: NetworkRuns,
     /// The network runs of the chunks pool helpers computed.
     helper_runs: NetworkRuns,
+    /// How a pool shared the job, for the summary.
+    pool: Option<protocol::PoolSummary>,
 }
 
 impl ReconstructionTask {
@@ -176,6 +178,11 @@ impl ReconstructionTask {
     /// on it.
     pub fn set_chunk_size(&mut self, windows: usize) -> Result<(), WorkerError> {
         Ok(self.job.set_chunk(windows)?)
+    }
+
+    /// Says in the summary how a pool shared the job.
+    pub fn set_pool_summary(&mut self, pool: protocol::PoolSummary) {
+        self.pool = Some(pool);
     }
 
     /// Methods of the job (outputs per window).
@@ -417,7 +424,12 @@ impl SessionWorker {
         }
         self.results = None;
         let job = start_job(engine, &open.aligned, ego_only_overlay)?;
-        Ok(ReconstructionTask { job, runs_before: engine.network_runs(), helper_runs: NetworkRuns::default() })
+        Ok(ReconstructionTask {
+            job,
+            runs_before: engine.network_runs(),
+            helper_runs: NetworkRuns::default(),
+            pool: None,
+        })
     }
 
     /// [`Self::start_reconstruction`] for a pool of `workers` workers (this one and
@@ -526,6 +538,7 @@ impl SessionWorker {
         let ego_exo = reconstructions.next().ok_or(WorkerError::NoReconstruction)?;
         let ego_only = reconstructions.next();
         let mut summary = reconstruction_summary(&open.aligned, &ego_exo, ego_only.as_ref(), windows, runs);
+        summary.pool = task.pool;
         let scene_json = self.timed(&mut timings, TimedStage::Scene, || {
             let scene = crate::scene::build_scene(&open.aligned, &ego_exo, ego_only.as_ref());
             scene.check().map_err(WorkerError::Scene)?;
@@ -821,5 +834,6 @@ fn reconstruction_summary(
         observer_ray_frames: observers_used.into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
         accuracy,
         timings: Vec::new(),
+        pool: None,
     }
 }

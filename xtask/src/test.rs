@@ -189,6 +189,7 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
             "bench page ({} frames, median of {}): {:.0} frames/s ego-exo, {:.0} frames/s whole app job",
             b.frames, b.runs, b.median_fps, b.median_app_fps
         );
+        crate::print_pool_line(b);
         if b.networks.is_some() {
             crate::print_network_table(b.networks.as_ref(), &serde_json::Value::Null);
         }
@@ -208,6 +209,17 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
                 n("posted_p95_ms"),
                 n("worker_ms_per_frame"),
                 row["frames"],
+            );
+        }
+        if let Some(hour) = &app.hour {
+            println!(
+                "hour-long session in the browser ({} frames): imported and reconstructed in {:.1} s ({:.0} frames/s) by {} workers; Chromium peak {:.0} MB in one process, {:.0} MB summed",
+                hour["frames"],
+                hour["reconstruct_s"].as_f64().unwrap_or(f64::NAN),
+                hour["fps"].as_f64().unwrap_or(f64::NAN),
+                hour["pool"]["workers"].as_u64().unwrap_or(1),
+                hour["peak_process_mb"].as_f64().unwrap_or(f64::NAN),
+                hour["sum_of_peaks_mb"].as_f64().unwrap_or(f64::NAN),
             );
         }
         if let Some(first) = &app.first_skeleton {
@@ -259,6 +271,8 @@ struct WebAppRun {
     relay: serde_json::Value,
     /// The e2e suite's time to first skeleton (`target/e2e/first-skeleton.json`), cold and warm.
     first_skeleton: Option<serde_json::Value>,
+    /// The hour-long browser test's measurements (`target/e2e/hour.json`).
+    hour: Option<serde_json::Value>,
 }
 
 /// Builds `dist/` (models from `models/` or `EGOEXO_MODELS`), then runs the Playwright suite
@@ -276,7 +290,8 @@ fn run_web_app(root: &Path, t: &tools::BrowserTestTools, phases: &mut Phases) ->
         phases.time("relay load (50 streams × 30 Hz)", || e2e::run_relay_load(root, 50, TEST_RELAY_LOAD_SECONDS))?;
     let first_skeleton =
         std::fs::read(run.out.join("first-skeleton.json")).ok().and_then(|bytes| serde_json::from_slice(&bytes).ok());
-    Ok(WebAppRun { sizes, e2e, bench, live, relay, first_skeleton })
+    let hour = std::fs::read(run.out.join("hour.json")).ok().and_then(|bytes| serde_json::from_slice(&bytes).ok());
+    Ok(WebAppRun { sizes, e2e, bench, live, relay, first_skeleton, hour })
 }
 
 /// The WebDriver capabilities file: Debian's Chromium binary and the flags it needs here.

@@ -27,6 +27,8 @@ enum Command {
     Mocap(commands::mocap::Args),
     /// Simulate ego-exo sessions (or training shards) from motion-library subjects.
     Synth(commands::synth::Args),
+    /// Simulate one session of any length without a motion library: the wearer walks in a circle.
+    Walk(commands::walk::Args),
     /// Score reconstruction methods on simulated sessions of `--subjects` with the paper's metrics
     /// (the nearest-neighbour baseline looks up poses among the library's other subjects).
     Eval(commands::eval::Args),
@@ -47,6 +49,7 @@ fn main() -> std::process::ExitCode {
         Command::Convert(args) => commands::convert::run(args),
         Command::Mocap(args) => commands::mocap::run(args),
         Command::Synth(args) => commands::synth::run(args),
+        Command::Walk(args) => commands::walk::run(args),
         Command::Eval(args) => commands::eval::run(args),
         Command::Reconstruct(args) => commands::reconstruct::run(args),
         Command::Serve(args) => commands::serve::run(args),

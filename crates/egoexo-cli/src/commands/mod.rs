@@ -13,3 +13,4 @@ pub mod share;
 pub mod simulation;
 pub mod synth;
 pub mod tracking;
+pub mod walk;

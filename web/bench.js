@@ -13,25 +13,38 @@ const say = (line) => {
 };
 
 await initViewer();
-const worker = new Worker(new URL('worker.js', import.meta.url), { type: 'module' });
-const client = new WorkerClient(worker);
-// The answer to the one request in flight: its result, or its error.
-const ANSWERS = new Set(['imported', 'reconstructed', 'exported', 'error', 'panic']);
-let pending = null;
-worker.onmessage = ({ data }) => {
-  const event = client.receive(data);
-  if (!event || !ANSWERS.has(event.type)) return;
-  const settle = pending;
-  pending = null;
-  if (event.type === 'error' || event.type === 'panic') settle?.reject(new Error(`${event.stage ?? 'panic'}: ${event.message}`));
-  else settle?.resolve(event);
-};
-worker.onerror = (e) => pending?.reject(new Error(e.message || 'worker failed'));
-// Sends a request (`send(client)`) and waits for its answer.
-const request = (send) => new Promise((resolve, reject) => {
-  pending = { resolve, reject };
-  send(client);
-});
+
+// A worker of the app with a pool of `workers` workers (`?workers=N` on its URL), and
+// `request(send)`: sends a request (`send(client)`) and waits for its answer.
+function appWorker(workers) {
+  const url = new URL('worker.js', import.meta.url);
+  url.searchParams.set('workers', String(workers));
+  const worker = new Worker(url, { type: 'module' });
+  const client = new WorkerClient(worker);
+  // The answer to the one request in flight: its result, or its error.
+  const ANSWERS = new Set(['imported', 'reconstructed', 'exported', 'error', 'panic']);
+  let pending = null;
+  worker.onmessage = ({ data }) => {
+    const event = client.receive(data);
+    if (!event || !ANSWERS.has(event.type)) return;
+    const settle = pending;
+    pending = null;
+    if (event.type === 'error' || event.type === 'panic') settle?.reject(new Error(`${event.stage ?? 'panic'}: ${event.message}`));
+    else settle?.resolve(event);
+  };
+  worker.onerror = (e) => pending?.reject(new Error(e.message || 'worker failed'));
+  const request = (send) => new Promise((resolve, reject) => {
+    pending = { resolve, reject };
+    send(client);
+  });
+  return { request, terminate: () => worker.terminate() };
+}
+
+// The measurements in one worker (`?workers=` on the page overrides it), as the goals are set.
+const one = appWorker(Number(params.get('workers') ?? 1));
+const request = one.request;
+// The same whole job shared by a pool of `poolSize` workers, for the scaling.
+const poolSize = Math.max(2, Number(params.get('pool') ?? 2));
 
 const median = (xs) => {
   const s = [...xs].sort((a, b) => a - b);
@@ -54,6 +67,13 @@ async function main() {
     return performance.now() - started;
   };
   say(`warm-up: ${(await time(false)).toFixed(0)} ms`);
+  // The pool: its own coordinator and helpers, warmed up on the same sample (the helpers
+  // start once the coordinator's models are loaded; two jobs make sure they are ready).
+  const pool = appWorker(poolSize);
+  await pool.request((c) => c.open_archive(sample.file, bytes.slice()));
+  for (let i = 0; i < 2; i += 1) await pool.request((c) => c.reconstruct(true));
+  const poolJob = [];
+  const poolShares = [];
   const egoExo = [];
   const appJob = [];
   // Per run, the worker's time per stage (its summary's `timings`, taken with the clock the
@@ -71,7 +91,13 @@ async function main() {
     const stages = Object.fromEntries((job.timings ?? []).map((t) => [t.stage, t.ms]));
     stages.export = performance.now() - exportStarted;
     stageRuns.push(stages);
-    say(`run ${i + 1}/${runs}: ego-exo ${egoExo[i].toFixed(0)} ms, whole job ${appJob[i].toFixed(0)} ms`);
+    await pool.request((c) => c.open_archive(sample.file, bytes.slice()));
+    const poolStarted = performance.now();
+    const { summary: pooled } = await pool.request((c) => c.reconstruct(true));
+    poolJob.push(performance.now() - poolStarted);
+    poolShares.push(pooled.pool ? pooled.pool.helper_chunks / pooled.pool.chunks : 0);
+    say(`run ${i + 1}/${runs}: ego-exo ${egoExo[i].toFixed(0)} ms, whole job ${appJob[i].toFixed(0)} ms, `
+      + `with ${poolSize} workers ${poolJob[i].toFixed(0)} ms (helpers computed ${(100 * poolShares[i]).toFixed(0)} % of the chunks)`);
   }
   const stageNames = [...new Set(stageRuns.flatMap((r) => Object.keys(r)))];
   const stages = stageNames.map((stage) => ({ stage, ms: median(stageRuns.map((r) => r[stage] ?? 0)) }));
@@ -86,9 +112,17 @@ async function main() {
     median_app_fps: frames / (median(appJob) / 1000),
     cores: navigator.hardwareConcurrency,
     stages,
+    pool_workers: poolSize,
+    median_pool_ms: median(poolJob),
+    median_pool_fps: frames / (median(poolJob) / 1000),
+    pool_speedup: median(appJob) / median(poolJob),
+    median_helper_share: median(poolShares),
   };
+  pool.terminate();
   say(`median ego-exo: ${result.median_fps.toFixed(0)} frames/s (${result.median_ms.toFixed(0)} ms)`);
   say(`median whole job: ${result.median_app_fps.toFixed(0)} frames/s (${result.median_app_ms.toFixed(0)} ms)`);
+  say(`median whole job, ${poolSize} workers: ${result.median_pool_fps.toFixed(0)} frames/s (${result.median_pool_ms.toFixed(0)} ms), `
+    + `${result.pool_speedup.toFixed(2)}× one worker`);
   result.networks = await compareNetworks(summary.tracking_points, Math.max(10, 4 * runs));
   document.body.dataset.result = JSON.stringify(result);
   document.body.dataset.state = 'done';

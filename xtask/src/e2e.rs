@@ -102,6 +102,9 @@ pub struct BenchResult {
     pub stages: Vec<(String, f64)>,
     /// The page's engine comparison (`web/bench-networks.js`), when it ran.
     pub networks: Option<serde_json::Value>,
+    /// The whole job shared by a pool of workers: (workers, median frames/s, speed-up over
+    /// one worker in the same run, median share of chunks the helpers computed).
+    pub pool: Option<(u64, f64, f64, f64)>,
 }
 
 /// Serves `dist/` and runs `web/bench.html` `runs` times through `tests/e2e/bench.mjs`.
@@ -134,6 +137,14 @@ fn parse_bench_line(out: &str, prefix: &str) -> Result<BenchResult> {
             })
             .unwrap_or_default(),
         networks: v.get("networks").cloned(),
+        pool: (|| {
+            Some((
+                v["pool_workers"].as_u64()?,
+                v["median_pool_fps"].as_f64()?,
+                v["pool_speedup"].as_f64()?,
+                v["median_helper_share"].as_f64()?,
+            ))
+        })(),
     })
 }
 

@@ -137,12 +137,24 @@ fn main() -> Result<()> {
                     w / n
                 );
             }
+            print_pool_line(&web);
             print_stage_table(&web.stages, &native.stages);
             let points = web.networks.as_ref().and_then(|n| n["points"].as_u64()).unwrap_or(3) as u8;
             let native_networks = e2e::run_native_networks(&models, points, 30)?;
             print_network_table(web.networks.as_ref(), &native_networks);
             Ok(())
         }
+    }
+}
+
+/// The bench page's pool line: the whole job shared by N workers against one, same run.
+fn print_pool_line(web: &e2e::BenchResult) {
+    if let Some((workers, fps, speedup, share)) = web.pool {
+        println!(
+            "  whole app job, a pool of {workers} workers: {fps:>8.0} frames/s, {speedup:.2}× one worker \
+             (helpers computed {:.0} % of the chunks)",
+            share * 100.0
+        );
     }
 }
 

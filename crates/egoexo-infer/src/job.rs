@@ -75,10 +75,7 @@ impl ChunkOutputs {
 
     /// Outputs from [`Self::to_bytes`]'s bytes.
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, InferError> {
-        postcard::from_bytes(bytes).map_err(|e| InferError::Chunk {
-            chunk: usize::MAX,
-            message: format!("{} bytes are not a chunk's window outputs: {e}", bytes.len()),
-        })
+        postcard::from_bytes(bytes).map_err(|e| InferError::ChunkBytes { bytes: bytes.len(), message: e.to_string() })
     }
 }
 

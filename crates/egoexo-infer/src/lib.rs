@@ -75,4 +75,7 @@ pub enum InferError {
     /// whose bytes do not decode.
     #[error("window chunk {chunk}: {message}")]
     Chunk { chunk: usize, message: String },
+    /// Bytes handed over as a chunk's outputs that do not decode as any.
+    #[error("{bytes} bytes are not a chunk's window outputs: {message}")]
+    ChunkBytes { bytes: usize, message: String },
 }

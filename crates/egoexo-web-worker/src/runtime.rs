@@ -19,8 +19,8 @@
 //! - a Rust panic is reported as a `panic` event (and on the console) before the module dies;
 //! - with a pool (the glue's `pool` object: `size` helpers, `start()` to spawn them, `post(i,
 //!   message, transfer)`), a reconstruction's chunks are shared with helper workers — the
-//!   same module, spawned by the glue once the models are in the cache — and decoded here in
-//!   order ([`crate::pool`]); a helper's messages come in through `handle_helper`. A helper
+//!   same module, spawned by the glue for a long session's job or once the first job is
+//!   done — and decoded here in order ([`crate::pool`]); a helper's messages come in through `handle_helper`. A helper
 //!   answers `pool-job` and `pool-chunk` requests from its coordinator.
 
 use std::cell::{Cell, RefCell};
@@ -226,7 +226,7 @@ struct Runtime {
     clock: Option<js_sys::Function>,
     /// The pool of helper workers, when this is the page's worker and the glue made one.
     pool: Option<PoolGlue>,
-    /// Whether the glue has spawned the helpers (once the models are cached).
+    /// Whether the glue has spawned the helpers ([`Runtime::start_helpers`]).
     helpers_started: Cell<bool>,
     /// Helpers that panicked or failed to start: never used again.
     dead_helpers: RefCell<BTreeSet<usize>>,
@@ -243,18 +243,10 @@ type ModelsFailure = (ErrorKind, String);
 
 impl Runtime {
     fn post(&self, event: Event) {
-        let transfer = Array::new();
-        for bytes in event.byte_buffers() {
-            transfer.push(&bytes.buffer());
-        }
-        let serializer = serde_wasm_bindgen::Serializer::json_compatible();
-        match serde::Serialize::serialize(&event, &serializer) {
-            Ok(value) => {
-                if let Err(e) = self.scope.post_message_with_transfer(&value, &transfer) {
-                    console_error(&format!("egoexo worker: cannot post an event: {e:?}"));
-                }
-            }
-            Err(e) => console_error(&format!("egoexo worker: cannot serialise an event: {e}")),
+        let posted = js_message_with_transfer(&event, event.byte_buffers())
+            .and_then(|(value, transfer)| self.scope.post_message_with_transfer(&value, &transfer));
+        if let Err(e) = posted {
+            console_error(&format!("egoexo worker: cannot post an event: {}", js_message(&e)));
         }
     }
 
@@ -492,14 +484,9 @@ impl Runtime {
     /// Posts `request` to helper `helper`, its byte buffers transferred.
     fn post_to_helper(&self, helper: usize, request: &Request) {
         let Some(pool) = &self.pool else { return };
-        let transfer = Array::new();
-        for bytes in request.byte_buffers() {
-            transfer.push(&bytes.buffer());
-        }
-        let serializer = serde_wasm_bindgen::Serializer::json_compatible();
-        let posted = serde::Serialize::serialize(request, &serializer)
-            .map_err(|e| JsValue::from_str(&e.to_string()))
-            .and_then(|value| pool.post.call3(&JsValue::UNDEFINED, &JsValue::from(helper as u32), &value, &transfer));
+        let posted = js_message_with_transfer(request, request.byte_buffers()).and_then(|(value, transfer)| {
+            pool.post.call3(&JsValue::UNDEFINED, &JsValue::from(helper as u32), &value, &transfer)
+        });
         if let Err(e) = posted {
             console_error(&format!("egoexo worker: cannot post to helper {helper}: {}", js_message(&e)));
             self.helper_inbox.borrow_mut().push_back((helper, Err("a request could not be posted to it".into())));
@@ -863,6 +850,20 @@ fn aes_gcm_params(iv: &[u8], header: &[u8]) -> AesGcmParams {
     params
 }
 
+/// A message as the JS value to post and the transfer list of its byte buffers.
+fn js_message_with_transfer<T: serde::Serialize>(
+    message: &T,
+    buffers: Vec<&JsBytes>,
+) -> Result<(JsValue, Array), JsValue> {
+    let transfer = Array::new();
+    for bytes in buffers {
+        transfer.push(&bytes.buffer());
+    }
+    let serializer = serde_wasm_bindgen::Serializer::json_compatible();
+    let value = message.serialize(&serializer).map_err(|e| JsValue::from_str(&format!("cannot serialise it: {e}")))?;
+    Ok((value, transfer))
+}
+
 /// `relative` resolved against `base`.
 fn resolve_url(relative: &str, base: &str) -> Result<String, ModelsFailure> {
     Url::new_with_base(relative, base)
@@ -878,7 +879,10 @@ fn short_path(url: &str) -> String {
 }
 
 fn js_message(e: &JsValue) -> String {
-    e.dyn_ref::<js_sys::Error>().map(|e| String::from(e.message())).unwrap_or_else(|| format!("{e:?}"))
+    e.dyn_ref::<js_sys::Error>()
+        .map(|e| String::from(e.message()))
+        .or_else(|| e.as_string())
+        .unwrap_or_else(|| format!("{e:?}"))
 }
 
 async fn fetch_bytes(scope: &DedicatedWorkerGlobalScope, url: &str, no_cache: bool) -> Result<Vec<u8>, ModelsFailure> {

@@ -82,6 +82,24 @@ pub struct MetricsAccumulator {
     frames: usize,
 }
 
+/// One frame's mean position error over `joints`, cm: the per-frame term of MPJPE (all 24
+/// joints), U-PE ([`UPPER_BODY_JOINTS`]) or L-PE ([`LOWER_BODY_JOINTS`]). NaN for no joints.
+pub fn frame_position_error_cm(pred: &JointPositions, truth: &JointPositions, joints: &[usize]) -> f64 {
+    let sum: f64 = joints.iter().map(|&j| dist(pred[j], truth[j])).sum();
+    100.0 * sum / joints.len() as f64
+}
+
+/// All 24 joints, for [`frame_position_error_cm`].
+pub const ALL_JOINTS: [usize; NUM_JOINTS] = {
+    let mut all = [0; NUM_JOINTS];
+    let mut j = 0;
+    while j < NUM_JOINTS {
+        all[j] = j;
+        j += 1;
+    }
+    all
+};
+
 fn dist(a: Vec3, b: Vec3) -> f64 {
     a.as_dvec3().distance(b.as_dvec3())
 }
@@ -204,5 +222,25 @@ mod tests {
         }
         assert_eq!(seen.iter().filter(|&&s| !s).count(), 1);
         assert!(!seen[0]);
+    }
+
+    #[test]
+    fn per_frame_errors_average_to_the_metrics() {
+        let frames = 7;
+        let truth: Vec<JointPositions> =
+            (0..frames).map(|t| std::array::from_fn(|j| Vec3::new(j as f32 * 0.1, t as f32 * 0.05, 0.0))).collect();
+        let pred: Vec<JointPositions> = truth
+            .iter()
+            .enumerate()
+            .map(|(t, f)| std::array::from_fn(|j| f[j] + Vec3::new(0.01 * (t + j % 3) as f32, 0.0, 0.02)))
+            .collect();
+        let m = evaluate(&pred, &truth, 30.0).unwrap().unwrap();
+        let mean = |joints: &[usize]| {
+            (0..frames).map(|t| frame_position_error_cm(&pred[t], &truth[t], joints)).sum::<f64>() / frames as f64
+        };
+        assert!((mean(&ALL_JOINTS) - m.mpjpe_cm).abs() < 1e-9);
+        assert!((mean(&LOWER_BODY_JOINTS) - m.lower_cm).abs() < 1e-9);
+        assert!((mean(&UPPER_BODY_JOINTS) - m.upper_cm).abs() < 1e-9);
+        assert!(frame_position_error_cm(&pred[0], &truth[0], &[]).is_nan());
     }
 }

@@ -9,6 +9,10 @@ use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
 use egoexo_core::skeleton::{NUM_JOINTS, PARENTS};
 use serde::{Deserialize, Serialize};
 
+pub mod timeline;
+
+pub use timeline::{ErrorTimeline, ObserverTimeline, TimelineData};
+
 /// Version of this layout (the page refuses other versions).
 pub const SCENE_FORMAT_VERSION: u32 = 1;
 
@@ -43,6 +47,9 @@ pub struct SceneData {
     pub floor_y: f32,
     /// Method that produced `joints` (`ego-exo`, …).
     pub method: String,
+    /// Series for the timeline plots (scenes from before they existed have none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timeline: Option<TimelineData>,
 }
 
 /// A device trajectory.
@@ -91,6 +98,7 @@ impl SceneData {
             observers: Vec::new(),
             floor_y: 0.0,
             method: method.to_string(),
+            timeline: None,
         }
     }
 
@@ -122,6 +130,9 @@ impl SceneData {
             expect(&format!("observer {} camera_poses", o.id), o.camera_poses.len(), 7 * f);
             expect(&format!("observer {} valid", o.id), o.valid.len(), f);
             expect(&format!("observer {} rays", o.id), o.rays.len(), 4 * EXO_KEYPOINT_COUNT * f);
+        }
+        if let Some(t) = &self.timeline {
+            problems.extend(t.check(f, self.observers.len()));
         }
         if self.format_version != SCENE_FORMAT_VERSION {
             problems.push(format!("format_version {} (expected {SCENE_FORMAT_VERSION})", self.format_version));
@@ -168,6 +179,7 @@ impl SceneData {
                 .collect(),
             floor_y: self.floor_y,
             method: self.method.clone(),
+            timeline: self.timeline.as_ref().map(|t| t.frames_slice(start, end)),
         }
     }
 }

@@ -4,11 +4,14 @@
 use egoexo_core::aligned::{AlignedSession, AlignedTrajectory};
 use egoexo_core::camera::CameraCalibration;
 use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
+use egoexo_core::foot_contact::{FOOT_JOINT_ABOVE_SOLE_M, FOOT_JOINTS};
 use egoexo_core::glam::{Vec2, Vec3};
+use egoexo_core::metrics::{ALL_JOINTS, LOWER_BODY_JOINTS, frame_position_error_cm};
 use egoexo_core::rays::canonicalize_keypoints;
+use egoexo_core::region::{DEFAULT_REGION_MARGIN, RegionProposal, propose_region};
 use egoexo_core::skeleton::NUM_JOINTS;
 use egoexo_infer::Reconstruction;
-use egoexo_scene::{DeviceTrack, ObserverScene, SceneData};
+use egoexo_scene::{DeviceTrack, ErrorTimeline, ObserverScene, ObserverTimeline, SceneData, TimelineData};
 
 fn flat_joints(joints: &[[Vec3; NUM_JOINTS]]) -> Vec<f32> {
     joints.iter().flat_map(|f| f.iter().flat_map(|p| p.to_array())).collect()
@@ -91,16 +94,87 @@ pub fn build_scene(aligned: &AlignedSession, recon: &Reconstruction, ego_only: O
         });
     }
     scene.floor_y = aligned.floor_y.unwrap_or_else(|| floor_y(&recon.joints[..frames], &recon.valid));
+    scene.timeline = Some(timeline(aligned, recon, ego_only, &scene));
     scene
 }
 
-/// The floor's height: the lowest ankle or foot joint over the tracked frames (0 without any).
+/// The timeline plots' series ([`TimelineData`]) for `scene`, built from the same session and
+/// reconstructions: per observer, the reconstruction's joints inside its image (the core's
+/// region proposal), its 2D keypoints, occlusion labels and the mean gate of its rays; with
+/// ground truth, the per-frame MPJPE and L-PE (the core's metric terms).
+pub fn timeline(
+    aligned: &AlignedSession,
+    recon: &Reconstruction,
+    ego_only: Option<&Reconstruction>,
+    scene: &SceneData,
+) -> TimelineData {
+    let frames = scene.frames;
+    let observers = aligned
+        .observers
+        .iter()
+        .zip(&scene.observers)
+        .enumerate()
+        .map(|(o, (observer, drawn))| {
+            let joints_in_view = (0..frames)
+                .map(|f| {
+                    if !(observer.head.valid[f] && recon.valid[f]) {
+                        return 0;
+                    }
+                    let pose = &observer.head.poses[f];
+                    match propose_region(&recon.joints[f], &observer.camera, pose, DEFAULT_REGION_MARGIN) {
+                        RegionProposal::Visible { joints_in_image, .. } => joints_in_image.min(NUM_JOINTS) as u8,
+                        RegionProposal::NotVisible(_) => 0,
+                    }
+                })
+                .collect();
+            let keypoints = observer.keypoints[..frames].iter().map(|k| k.iter().flatten().count() as u8).collect();
+            let occluded = aligned
+                .ground_truth
+                .as_ref()
+                .and_then(|gt| gt.occluded.get(o))
+                .filter(|labels| labels.iter().any(|&m| m != 0))
+                .map(|labels| (0..frames).map(|f| labels.get(f).map_or(0, |m| m.count_ones() as u8)).collect());
+            let gate_mean = (0..frames)
+                .map(|f| {
+                    let rays = &drawn.rays[4 * EXO_KEYPOINT_COUNT * f..4 * EXO_KEYPOINT_COUNT * (f + 1)];
+                    let gates: Vec<f32> =
+                        rays.chunks(4).filter(|r| r.iter().any(|&v| v != 0.0)).map(|r| r[3]).collect();
+                    if gates.is_empty() { -1.0 } else { gates.iter().sum::<f32>() / gates.len() as f32 }
+                })
+                .collect();
+            ObserverTimeline { id: observer.id.clone(), joints_in_view, keypoints, occluded, gate_mean }
+        })
+        .collect();
+    let errors = aligned.ground_truth.as_ref().filter(|gt| gt.poses.len() >= frames).map(|gt| {
+        let truth: Vec<_> =
+            gt.poses[..frames].iter().map(|p| aligned.skeleton.forward_kinematics(p).positions).collect();
+        let series = |r: &Reconstruction, joints: &[usize]| -> Vec<f32> {
+            (0..frames)
+                .map(|f| {
+                    let scored = r.valid.get(f).copied().unwrap_or(false) && gt.valid[f] && f < r.joints.len();
+                    let e = if scored { frame_position_error_cm(&r.joints[f], &truth[f], joints) } else { -1.0 };
+                    if e.is_finite() { e as f32 } else { -1.0 }
+                })
+                .collect()
+        };
+        ErrorTimeline {
+            mpjpe_cm: series(recon, &ALL_JOINTS),
+            lower_cm: series(recon, &LOWER_BODY_JOINTS),
+            ego_only_mpjpe_cm: ego_only.map(|e| series(e, &ALL_JOINTS)),
+            ego_only_lower_cm: ego_only.map(|e| series(e, &LOWER_BODY_JOINTS)),
+        }
+    });
+    TimelineData { observers, errors }
+}
+
+/// The floor's height when the session does not say: under the lowest sole over the tracked
+/// frames (the lowest ankle or foot joint less [`FOOT_JOINT_ABOVE_SOLE_M`]); 0 without any.
 pub fn floor_y(joints: &[[Vec3; NUM_JOINTS]], valid: &[bool]) -> f32 {
     let y = joints
         .iter()
         .zip(valid)
         .filter(|(_, v)| **v)
-        .flat_map(|(j, _)| [7, 8, 10, 11].map(|k| j[k].y))
+        .flat_map(|(j, _)| FOOT_JOINTS.map(|k| j[k].y))
         .fold(f32::INFINITY, f32::min);
-    if y.is_finite() { y } else { 0.0 }
+    if y.is_finite() { y - FOOT_JOINT_ABOVE_SOLE_M } else { 0.0 }
 }

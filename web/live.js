@@ -165,6 +165,7 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
       console.warn('live frame not shown:', error.message ?? error);
       return;
     }
+    $('plots').hidden = true; // the plots belong to a recorded session's timeline
     const info = event.frame;
     // The drawn frame's scene (SceneData JSON bytes), for the curious and the tests.
     live.scene = event.scene;

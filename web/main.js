@@ -5,6 +5,7 @@
 
 import initViewer, { Viewer, WorkerClient, fragment_with_time, parse_fragment, share_fragment } from './pkg/egoexo_viewer.js';
 import { createLive } from './live.js';
+import { exportPng, exportVideo } from './video.js';
 import { deleteShare, fetchShare, forgetShare, loadShareConfig, megabytes, rememberShare, savedShares, uploadShare } from './share.js';
 
 const $ = (id) => document.getElementById(id);
@@ -357,8 +358,8 @@ function showSession(s) {
     ...(s.wrists ?? []).map((w) => [`${w.side} wrist`,
       `tracked on ${w.tracked_percent.toFixed(1)}% of frames, longest gap ${w.longest_gap_s.toFixed(2)} s (${w.source})`]),
     ['floor', s.floor ? `${s.floor.height_m.toFixed(3)} m, from ${s.floor.source}` : 'unknown'],
-    ['observers', s.observers.length === 0 ? 'none' : s.observers.map((o) =>
-      `${o.id} (${o.camera}, keypoints in ${o.keypoint_frames} frames)`).join('; ')],
+    ...(s.observers.length === 0 ? [['observers', 'none']] : s.observers.map((o) =>
+      [o.id, `${o.camera}, keypoints in ${o.keypoint_frames} frames`])),
     ['ground truth', s.ground_truth ? 'yes' : 'no'],
   ]);
   $('session-warnings').replaceChildren(...s.warnings.map((w) => {
@@ -400,6 +401,8 @@ function showScene(scene, summary, how) {
   $('frame-count').textContent = `${frames} frames`;
   $('frame-count').hidden = false;
   applyToggles();
+  showCameraChoices(viewer);
+  drawPlots();
   $('rerun-button').hidden = !(state.openedShare?.includes_recording);
   // A share without its recording has no session to save.
   $('save-session').hidden = Boolean(state.openedShare && !state.openedShare.includes_recording);
@@ -425,6 +428,46 @@ function showScene(scene, summary, how) {
   setState('ready');
 }
 
+// ---------------------------------------------------------------- video and picture
+
+async function saveVideo() {
+  const v = state.viewer;
+  if (!v || state.busy || state.videoExport) return;
+  const loop = v.loop_range();
+  const [first, last] = loop ? [loop[0], loop[1]] : [0, v.frames() - 1];
+  const abort = new AbortController();
+  state.videoExport = abort;
+  $('video-progress-row').hidden = false;
+  $('video-progress').value = 0;
+  $('video-button').disabled = true;
+  try {
+    const mp4 = await exportVideo(v, {
+      first, last, signal: abort.signal,
+      onProgress: (f) => { $('video-progress').value = f; },
+    });
+    const session = state.session?.name ?? 'egoexo';
+    download(mp4, `${session}-${state.summary?.method ?? 'view'}.mp4`, 'video/mp4');
+  } catch (error) {
+    if (error.name !== 'AbortError') showError('The video could not be made', error.message ?? String(error));
+  } finally {
+    state.videoExport = null;
+    $('video-progress-row').hidden = true;
+    $('video-button').disabled = false;
+  }
+}
+
+async function savePng() {
+  const v = state.viewer;
+  if (!v) return;
+  try {
+    const blob = await exportPng(v);
+    const session = state.session?.name ?? 'egoexo';
+    download(new Uint8Array(await blob.arrayBuffer()), `${session}-frame-${v.frame() + 1}.png`, 'image/png');
+  } catch (error) {
+    showError('The picture could not be made', error.message ?? String(error));
+  }
+}
+
 function download(bytes, fileName, mimeType) {
   const url = URL.createObjectURL(new Blob([bytes], { type: mimeType }));
   const a = document.createElement('a');
@@ -441,12 +484,140 @@ function download(bytes, fileName, mimeType) {
 function applyToggles() {
   const v = state.viewer;
   if (!v) return;
+  v.set_show_body($('show-body').checked);
   v.set_show_ego_only($('show-ego-only').checked);
   v.set_show_ground_truth($('show-ground-truth').checked);
   v.set_show_rays($('show-rays').checked);
 }
 
+// The camera controls for the scene just shown: follow as the viewer decided (on for a wearer
+// who walks about, until the user chooses), and one view per observer.
+function showCameraChoices(viewer) {
+  $('follow').checked = viewer.follows();
+  const select = $('view-from');
+  const orbit = select.options[0];
+  select.replaceChildren(orbit, ...viewer.observer_ids().map((id, i) => {
+    const option = document.createElement('option');
+    option.value = String(i);
+    option.textContent = `observer ${id}`;
+    return option;
+  }));
+  select.value = String(viewer.view_from_observer());
+}
+
+function setViewFrom(index) {
+  const v = state.viewer;
+  if (!v) return;
+  v.set_view_from_observer(index);
+  $('view-from').value = String(v.view_from_observer());
+}
+
+// View shortcuts (the viewer itself handles playback keys): B bodies, F follow, O next view,
+// R re-frame, ? help. Ignored while typing in a field.
+function onViewKey(e) {
+  if (e.ctrlKey || e.metaKey || e.altKey || e.defaultPrevented) return;
+  const t = e.target;
+  const typing = t && (t.isContentEditable || ['TEXTAREA', 'SELECT'].includes(t.tagName)
+    || (t.tagName === 'INPUT' && !['checkbox', 'radio', 'range', 'button'].includes(t.type)));
+  if (typing) return;
+  if (e.key === '?') {
+    $('help-dialog').showModal();
+    e.preventDefault();
+    return;
+  }
+  const v = state.viewer;
+  if (!v || v.frames() === 0) return;
+  switch (e.key.toLowerCase()) {
+    case 'b':
+      $('show-body').checked = !$('show-body').checked;
+      applyToggles();
+      break;
+    case 'f':
+      $('follow').checked = !$('follow').checked;
+      v.set_follow($('follow').checked);
+      break;
+    case 'o': {
+      const views = v.observer_ids().length + 1;
+      setViewFrom(((v.view_from_observer() + 2) % views) - 1);
+      break;
+    }
+    case 'r':
+      v.reset_camera();
+      break;
+    default:
+      return;
+  }
+  e.preventDefault();
+}
+
+// ---------------------------------------------------------------- timeline plots
+
+// The plots share the scrubber's time axis: the canvas spans the scrubber's track (its width
+// less the thumb), so a frame sits at the same x in both. The viewer draws the image and
+// says what lies where; the page only places it.
+const SCRUBBER_THUMB_PX = 8;
+
+function plotAxis() {
+  const track = $('scrubber').getBoundingClientRect();
+  const box = $('plots').getBoundingClientRect();
+  return { left: track.left - box.left + SCRUBBER_THUMB_PX, width: Math.max(1, track.width - 2 * SCRUBBER_THUMB_PX) };
+}
+
+function drawPlots() {
+  const v = state.viewer;
+  const plots = $('plots');
+  const layout = v && v.frames() > 1 ? v.plot_layout() : null;
+  if (!layout || layout.rows.length === 0) {
+    plots.hidden = true;
+    state.plotAxis = null;
+    return;
+  }
+  plots.hidden = false;
+  const axis = plotAxis();
+  const width = Math.round(axis.width);
+  const canvas = $('plot-canvas');
+  canvas.width = width;
+  canvas.height = layout.height;
+  canvas.style.width = `${width}px`;
+  canvas.style.height = `${layout.height}px`;
+  canvas.style.left = `${axis.left}px`;
+  canvas.getContext('2d').putImageData(new ImageData(v.plot_image(width), width, layout.height), 0, 0);
+  $('plot-labels').style.width = `${axis.left}px`;
+  $('plot-labels').replaceChildren(...layout.rows.map((row) => {
+    const label = document.createElement('span');
+    label.textContent = row.kind === 'error' ? `${row.label} 0–${layout.error_max_cm}` : row.label;
+    label.style.top = `${row.top + row.height / 2}px`;
+    return label;
+  }));
+  state.plotAxis = { left: axis.left, width };
+  movePlayhead(v.frame());
+}
+
+function movePlayhead(frame) {
+  const axis = state.plotAxis;
+  const frames = state.viewer?.frames() ?? 0;
+  if (!axis || frames === 0) return;
+  const x = axis.left + (frames > 1 ? frame / (frames - 1) : 0) * axis.width;
+  $('plot-playhead').style.left = `${x}px`;
+}
+
+function wirePlots() {
+  const canvas = $('plot-canvas');
+  const frameAt = (e) => state.viewer.plot_frame_at(e.offsetX, canvas.clientWidth);
+  canvas.addEventListener('click', (e) => state.viewer?.seek(frameAt(e)));
+  canvas.addEventListener('mousemove', (e) => {
+    if (!state.viewer) return;
+    const hover = $('plot-hover');
+    hover.textContent = state.viewer.plot_text(frameAt(e));
+    hover.hidden = false;
+    hover.style.left = `${Math.min(canvas.offsetLeft + e.offsetX + 12, $('plots').clientWidth - hover.offsetWidth - 4)}px`;
+  });
+  canvas.addEventListener('mouseleave', () => { $('plot-hover').hidden = true; });
+  new ResizeObserver(() => drawPlots()).observe($('timeline'));
+}
+
 function onFrame(frame, timeSeconds) {
+  movePlayhead(frame);
   const frames = state.viewer.frames();
   const playing = state.viewer.is_playing();
   $('frame-readout').textContent = `frame ${frame + 1} / ${frames} · ${timeSeconds.toFixed(2)} s`;
@@ -634,7 +805,17 @@ function wireControls() {
     if (!zone.contains(e.target)) onDrop(e);
   });
 
-  for (const id of ['show-ego-only', 'show-ground-truth', 'show-rays']) $(id).addEventListener('change', applyToggles);
+  for (const id of ['show-body', 'show-ego-only', 'show-ground-truth', 'show-rays']) {
+    $(id).addEventListener('change', applyToggles);
+  }
+  $('follow').addEventListener('change', (e) => state.viewer?.set_follow(e.target.checked));
+  $('view-from').addEventListener('change', (e) => setViewFrom(Number(e.target.value)));
+  $('help-button').addEventListener('click', () => $('help-dialog').showModal());
+  $('video-button').addEventListener('click', saveVideo);
+  $('video-cancel').addEventListener('click', () => state.videoExport?.abort());
+  $('png-button').addEventListener('click', savePng);
+  $('help-close').addEventListener('click', () => $('help-dialog').close());
+  window.addEventListener('keydown', onViewKey);
   $('play-button').addEventListener('click', () => state.viewer?.toggle_play());
   $('step-back').addEventListener('click', () => state.viewer?.step(-1));
   $('step-forward').addEventListener('click', () => state.viewer?.step(1));
@@ -655,6 +836,7 @@ function wireControls() {
     state.client.save_session();
   });
   live.wire();
+  wirePlots();
   for (const button of document.querySelectorAll('#export-buttons button')) {
     button.addEventListener('click', () => {
       if (state.busy) return;

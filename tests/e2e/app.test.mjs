@@ -3,6 +3,7 @@
 // target/e2e/.
 
 import assert from 'node:assert/strict';
+import { execFileSync } from 'node:child_process';
 import { readFileSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
 import { after, before, describe, test } from 'node:test';
@@ -10,6 +11,8 @@ import { after, before, describe, test } from 'node:test';
 import { OUT, decodePng, launch, openApp, savePng, skeletonPixels } from './browser.mjs';
 
 const REPO = new URL('../../', import.meta.url).pathname;
+// The tests' Python (PyAV decodes the video export); `cargo xtask test` sets it.
+const PYTHON = process.env.EGOEXO_PYTHON;
 const SAMPLES = JSON.parse(readFileSync(join(REPO, 'public/samples/samples.json'), 'utf8'));
 const SAMPLE = SAMPLES.samples[0];
 // A multi-device Aria MPS folder (egoexo-session's committed fixture).
@@ -112,6 +115,179 @@ describe('the sample, WebGL2 canvas', () => {
     assert.ok(changed > 100, `${changed} pixels changed`);
   });
 
+  test('the viewer: a body of capsules (B: stick figures), the follow camera, each observer\'s view (O), the help overlay (?)', async () => {
+    const { page } = app;
+    const viewer = (f, ...args) => page.evaluate(([f, args]) => window.egoexo.viewer[f](...args), [f, args]);
+    const shot = async (name) => decodePng(await page.locator('#view').screenshot(name ? { path: join(OUT, name) } : {}));
+    const settle = () => page.waitForTimeout(250);
+    await viewer('pause');
+    await page.uncheck('#show-rays');
+    await page.uncheck('#show-ego-only');
+    await page.uncheck('#show-ground-truth');
+    await page.uncheck('#follow');
+    await viewer('reset_camera');
+    await viewer('seek', 300);
+    await settle();
+    const body = skeletonPixels((await shot('sample-body.png')).rgba);
+    await page.keyboard.press('b');
+    await settle();
+    assert.equal(await page.isChecked('#show-body'), false, 'B switches to stick figures');
+    const stick = skeletonPixels((await shot('sample-stick.png')).rgba);
+    await page.keyboard.press('b');
+    assert.equal(await page.isChecked('#show-body'), true);
+    // Capsules sized like a body cover several times the stick figure's pixels.
+    assert.ok(body.left > 1.8 * stick.left && body.right > 1.8 * stick.right,
+      `body ${JSON.stringify(body)} vs stick ${JSON.stringify(stick)}`);
+
+    // Following: the wearer stays near the middle of the view wherever it walks.
+    await page.keyboard.press('f');
+    assert.equal(await page.isChecked('#follow'), true);
+    assert.equal(await viewer('follows'), true);
+    const centroid = ({ rgba, width, height }) => {
+      let n = 0; let sx = 0; let sy = 0;
+      for (let i = 0; i < rgba.length; i += 4) {
+        const [r, g, b] = [rgba[i], rgba[i + 1], rgba[i + 2]];
+        const left = b >= 140 && r <= 0.4 * b && g <= 0.65 * b && g >= r;
+        const right = r >= 140 && g <= 0.58 * r && g >= 0.28 * r && b <= 0.3 * r;
+        if (left || right) { const p = i / 4; sx += p % width; sy += Math.floor(p / width); n += 1; }
+      }
+      return { x: sx / n / width, y: sy / n / height, n };
+    };
+    const followed = [];
+    for (const frame of [60, 600, 1100]) {
+      await viewer('seek', frame);
+      await settle();
+      followed.push(centroid(await shot(`sample-follow-${frame}.png`)));
+    }
+    for (const c of followed) {
+      assert.ok(c.n > 200 && Math.abs(c.x - 0.5) < 0.15 && Math.abs(c.y - 0.5) < 0.25, `followed body at ${JSON.stringify(c)}`);
+    }
+    await page.keyboard.press('f');
+    assert.equal(await viewer('follows'), false);
+
+    // Through each observer's camera: its frustum becomes the view, its keypoints (gate-coloured
+    // markers) are drawn over the body; O cycles orbit → observer 1 → observer 2 → orbit.
+    // Rays off: the only gate-coloured things in an observer's view are its own keypoints.
+    await page.uncheck('#show-rays');
+    const ids = await viewer('observer_ids');
+    assert.ok(ids.length >= 1, 'the sample has observers');
+    // For each observer, a frame where it sees the wearer (the most keypoints with rays).
+    const seeing = await page.evaluate(() => {
+      const raw = window.egoexo.scene;
+      const s = typeof raw === 'string' ? JSON.parse(raw) : JSON.parse(new TextDecoder().decode(raw));
+      return s.observers.map((o) => {
+        let best = 0; let most = -1;
+        for (let f = 0; f < s.frames; f += 1) {
+          let n = 0;
+          for (let k = 0; k < 13; k += 1) if (o.rays[4 * (13 * f + k) + 3] > 0.5) n += 1;
+          if (n > most) { most = n; best = f; }
+        }
+        return best;
+      });
+    });
+    for (let i = 0; i < ids.length; i += 1) {
+      await viewer('seek', seeing[i]);
+      await page.keyboard.press('o');
+      assert.equal(await viewer('view_from_observer'), i);
+      assert.equal(await page.inputValue('#view-from'), String(i));
+      await settle();
+      const image = await shot(`sample-observer-${ids[i]}.png`);
+      const { left, right } = skeletonPixels(image.rgba);
+      assert.ok(left + right > 80, `the wearer is in observer ${ids[i]}'s view: ${left} + ${right}`);
+      let markers = 0;
+      for (let p = 0; p < image.rgba.length; p += 4) {
+        const [r, g, b] = [image.rgba[p], image.rgba[p + 1], image.rgba[p + 2]];
+        if (g > 150 && b < 0.45 * g && r < 1.1 * g) markers += 1; // the gate's yellow → green (not the body's orange)
+      }
+      assert.ok(markers > 40, `observer ${ids[i]}: ${markers} gate-coloured keypoint pixels`);
+    }
+    await page.keyboard.press('o');
+    assert.equal(await viewer('view_from_observer'), -1);
+    await assert.rejects(viewer('set_view_from_observer', ids.length), /no observer/);
+
+    // The timeline plots: a strip per observer and the error over time, under the scrubber;
+    // hovering says the values, clicking seeks.
+    assert.equal(await page.isVisible('#plots'), true);
+    const labels = await app.text('#plot-labels');
+    for (const id of ids) assert.match(labels, new RegExp(id));
+    assert.match(labels, /error \(cm\) 0–\d+/);
+    const canvas = page.locator('#plot-canvas');
+    const box = await canvas.boundingBox();
+    const track = await page.locator('#scrubber').boundingBox();
+    assert.ok(box.x > track.x && box.x + box.width < track.x + track.width + 1, 'the plots span the scrubber');
+    await canvas.hover({ position: { x: box.width * 0.4, y: 5 } });
+    const hover = await app.text('#plot-hover');
+    assert.match(hover, /joints in view/);
+    assert.match(hover, /MPJPE \d+\.\d cm/);
+    await canvas.click({ position: { x: box.width * 0.25, y: box.height - 10 } });
+    const frames = await viewer('frames');
+    const clicked = await viewer('frame');
+    assert.ok(Math.abs(clicked - 0.25 * (frames - 1)) <= 2, `clicked at a quarter, now at frame ${clicked} of ${frames}`);
+    const playhead = await page.locator('#plot-playhead').boundingBox();
+    assert.ok(Math.abs(playhead.x - (box.x + box.width * 0.25)) <= 3, `playhead at ${playhead.x}`);
+    await page.screenshot({ path: join(OUT, 'app-plots.png') });
+
+    await page.keyboard.press('?');
+    assert.equal(await page.evaluate(() => document.getElementById('help-dialog').open), true);
+    assert.match(await app.text('#help-dialog'), /follow the wearer/);
+    await page.screenshot({ path: join(OUT, 'app-help.png') });
+    await page.click('#help-close');
+    await page.screenshot({ path: join(OUT, 'app-1280x800.png') });
+  });
+
+  test('the 3D view exports as an MP4 (looped frames, session rate; decoded by PyAV) and a PNG; a video export cancels', async () => {
+    const { page } = app;
+    assert.ok(PYTHON, 'EGOEXO_PYTHON (the tests\' venv, `cargo xtask setup`) decodes the video');
+    const viewer = (f, ...args) => page.evaluate(([f, args]) => window.egoexo.viewer[f](...args), [f, args]);
+    await viewer('set_view_from_observer', -1);
+    await viewer('pause');
+    await viewer('set_loop', 100, 159);
+    const fps = await viewer('fps');
+    const [download] = await Promise.all([
+      page.waitForEvent('download', { timeout: 180_000 }),
+      page.click('#video-button'),
+    ]);
+    const path = join(OUT, 'sample-view.mp4');
+    await download.saveAs(path);
+    assert.match(download.suggestedFilename(), /\.mp4$/);
+    // An independent decoder (FFmpeg, through PyAV) reads every frame back.
+    const probe = `
+import av, json, sys
+with av.open(sys.argv[1]) as c:
+    s = c.streams.video[0]
+    frames = [f.to_ndarray(format="rgb24") for f in c.decode(s)]
+    lit = [float((f.max(axis=2) > 80).mean()) for f in frames]
+    print(json.dumps({"codec": s.codec_context.name, "frames": len(frames), "width": s.codec_context.width,
+                      "height": s.codec_context.height, "rate": float(s.average_rate), "lit": min(lit)}))
+`;
+    const info = JSON.parse(execFileSync(PYTHON, ['-c', probe, path], { encoding: 'utf8' }));
+    assert.equal(info.codec, 'h264');
+    assert.equal(info.frames, 60, JSON.stringify(info));
+    assert.ok(Math.abs(info.rate - fps) < 0.01, JSON.stringify(info));
+    const canvas = await page.evaluate(() => [window.egoexo.viewer.canvas().width, window.egoexo.viewer.canvas().height]);
+    assert.deepEqual([info.width, info.height], canvas.map((v) => v & ~1));
+    assert.ok(info.lit > 0.002, `every frame shows the scene, not a blank canvas: ${JSON.stringify(info)}`);
+    assert.equal(await page.isVisible('#video-progress-row'), false);
+
+    // The whole session, cancelled part-way: no file, no error, the progress bar gone.
+    await viewer('clear_loop');
+    let downloaded = false;
+    page.once('download', () => { downloaded = true; });
+    await page.click('#video-button');
+    await page.waitForFunction(() => document.getElementById('video-progress').value > 0.02, null, { timeout: 60_000 });
+    await page.click('#video-cancel');
+    await page.waitForFunction(() => document.getElementById('video-progress-row').hidden, null, { timeout: 30_000 });
+    await page.waitForTimeout(500);
+    assert.equal(downloaded, false);
+    assert.equal(await page.isVisible('#error-panel'), false);
+
+    const [png] = await Promise.all([page.waitForEvent('download'), page.click('#png-button')]);
+    const pngPath = join(OUT, 'sample-frame.png');
+    await png.saveAs(pngPath);
+    const image = decodePng(readFileSync(pngPath));
+    assert.deepEqual([image.width, image.height], canvas);
+  });
+
   test('exports download the worker\'s files', async () => {
     const { page } = app;
     const expectations = { bvh: 'HIERARCHY', csv: 'frame,time_s', glb: 'glTF', npz: 'PK' };
@@ -205,6 +381,10 @@ describe('bad input and failures', () => {
       assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
       const facts = await app.text('#session-facts');
       assert.match(facts, /single Aria MPS device folder/);
+      // Warnings about the whole session read as sentences (no empty file name before a colon).
+      const warnings = await app.page.$$eval('#session-warnings li', (items) => items.map((li) => li.textContent));
+      assert.ok(warnings.some((w) => w.startsWith('one device: a session without observers')), JSON.stringify(warnings));
+      assert.ok(warnings.every((w) => !w.startsWith(':') && !w.startsWith(' ')), JSON.stringify(warnings));
       assert.match(facts, /3-point tracking: head, left_wrist, right_wrist \(the wrists are tracked on \d+% \(left\) and \d+% \(right\) of the head's frames: the 3-point model uses them where they are/);
       assert.match(facts, /left wrist\s*tracked on \d+\.\d% of frames, longest gap 0\.[45]\d s \(MPS wrist_and_palm_poses\.csv v2/);
       assert.match(facts, /right wrist\s*tracked on \d+\.\d% of frames, longest gap 0\.[23]\d s/);
@@ -221,6 +401,9 @@ describe('bad input and failures', () => {
       assert.equal(valid('right_wrist', 1.0), true);
       assert.equal(valid('left_wrist', 1.0), false, 'the left wrist is not drawn while out of view');
       assert.equal(valid('left_wrist', 0.4), true);
+      await app.page.evaluate(() => window.egoexo.viewer.seek(20));
+      await app.page.waitForTimeout(250);
+      await app.page.screenshot({ path: join(OUT, 'mps-one-device.png') });
       assert.deepEqual(app.errors, []);
     } finally {
       await app.close();

@@ -88,6 +88,9 @@ describe('a shared reconstruction', () => {
       assert.equal(await other.page.evaluate(() => window.egoexo.viewer.frame()), MOMENT_FRAME);
       assert.equal(await other.page.evaluate(() => window.egoexo.viewer.is_playing()), false);
       assert.deepEqual(await shownJoints(other, MOMENT_FRAME), expected);
+      // The timeline plots came with the share: a strip per observer and the errors.
+      assert.equal(await other.page.isVisible('#plots'), true);
+      assert.match(await other.text('#plot-labels'), /observer-1[\s\S]*error \(cm\)/);
       // Exports work without reconstructing, and the recording came along.
       const [download] = await Promise.all([other.page.waitForEvent('download'), other.page.click('[data-format=bvh]')]);
       assert.match(download.suggestedFilename(), /-ego-exo\.bvh$/);

@@ -9,7 +9,7 @@ use std::process::Command;
 use anyhow::{Context, Result, bail};
 
 use crate::cmd::{self, TestCounts};
-use crate::serve;
+use crate::{serve, tools};
 
 /// What the browser scripts need to know.
 #[derive(Clone, Debug)]
@@ -28,6 +28,11 @@ impl BrowserRun {
             .env("EGOEXO_E2E_OUT", &self.out)
             // The CLI tests (`egoexo share` → the page) use the binary the server runs from.
             .env("EGOEXO_BIN", root.join("target").join("debug").join("egoexo"));
+        // The video export's check decodes the MP4 with PyAV from the tests' venv.
+        let python = tools::venv_python(root);
+        if python.is_file() {
+            c.env("EGOEXO_PYTHON", python);
+        }
         c
     }
 
@@ -105,6 +110,8 @@ pub struct BenchResult {
     /// The whole job shared by a pool of workers: (workers, median frames/s, speed-up over
     /// one worker in the same run, median share of chunks the helpers computed).
     pub pool: Option<(u64, f64, f64, f64)>,
+    /// The 3D view's median frame time: (backend, width, height, bodies ms, stick figures ms).
+    pub render: Option<(String, u64, u64, f64, f64)>,
 }
 
 /// Serves `dist/` and runs `web/bench.html` `runs` times through `tests/e2e/bench.mjs`.
@@ -143,6 +150,16 @@ fn parse_bench_line(out: &str, prefix: &str) -> Result<BenchResult> {
                 v["median_pool_fps"].as_f64()?,
                 v["pool_speedup"].as_f64()?,
                 v["median_helper_share"].as_f64()?,
+            ))
+        })(),
+        render: (|| {
+            let r = &v["render"];
+            Some((
+                r["backend"].as_str()?.to_string(),
+                r["width"].as_u64()?,
+                r["height"].as_u64()?,
+                r["body_ms"].as_f64()?,
+                r["stick_ms"].as_f64()?,
             ))
         })(),
     })

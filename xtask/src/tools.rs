@@ -124,11 +124,16 @@ pub fn ensure_native_test_tools(root: &Path) -> Result<NativeTestTools> {
     Ok(NativeTestTools { python, node_modules })
 }
 
+/// The tests' venv interpreter, `target/py/bin/python` (it may not exist yet).
+pub fn venv_python(root: &Path) -> PathBuf {
+    root.join("target").join("py").join("bin").join("python")
+}
+
 /// `target/py`, a venv with the pinned `tests/requirements.txt`; reinstalled when that file
 /// changes (a copy of what was installed is kept in the venv).
 fn ensure_python_venv(root: &Path) -> Result<PathBuf> {
     let venv = root.join("target").join("py");
-    let python = venv.join("bin").join("python");
+    let python = venv_python(root);
     let requirements = root.join("tests").join("requirements.txt");
     let wanted =
         std::fs::read_to_string(&requirements).with_context(|| format!("reading {}", requirements.display()))?;

@@ -4,7 +4,7 @@
 //! wgpu's `0..1` clip range (right-handed view space, camera looking down −Z).
 
 use glam::camera::rh::{proj::directx, view};
-use glam::{Mat4, Vec2, Vec3};
+use glam::{Mat4, Quat, Vec2, Vec3, Vec4};
 
 /// Vertical field of view of the view camera, radians.
 pub const FOV_Y: f32 = 0.8;
@@ -43,6 +43,44 @@ impl Bounds {
         0.5 * (self.max - self.min).length()
     }
 }
+
+/// Where a frame is drawn from: world → clip (wgpu's `0..1` depth) and the eye in the world,
+/// metres.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewPoint {
+    pub view_projection: Mat4,
+    pub position: Vec3,
+}
+
+impl ViewPoint {
+    /// Pixel position (origin top-left, +y down) of world point `p` in a `width × height`
+    /// viewport, or `None` behind the eye.
+    pub fn project(&self, p: Vec3, width: f32, height: f32) -> Option<Vec2> {
+        let clip = self.view_projection * p.extend(1.0);
+        if clip.w <= 1e-6 {
+            return None;
+        }
+        let ndc = clip.truncate() / clip.w;
+        Some(Vec2::new((ndc.x + 1.0) * 0.5 * width, (1.0 - ndc.y) * 0.5 * height))
+    }
+
+    /// The view through an observer's camera: `rotation`, `centre` = `T_world_camera` of its
+    /// optical frame (+X right, +Y down, +Z forward), vertical half field of view
+    /// `half_fov_y` radians (wider lenses are drawn at [`MAX_OBSERVER_HALF_FOV`]: a perspective
+    /// view cannot show a fisheye's whole field), in a viewport of `aspect` = width / height.
+    pub fn through_camera(rotation: Quat, centre: Vec3, half_fov_y: f32, aspect: f32) -> Self {
+        let aspect = if aspect.is_finite() && aspect > 0.0 { aspect } else { 1.0 };
+        let half_fov_y = if half_fov_y.is_finite() { half_fov_y.clamp(0.05, MAX_OBSERVER_HALF_FOV) } else { 0.6 };
+        // World → optical, then optical (+Y down, +Z forward) → view (+Y up, looking down −Z).
+        let world_to_optical = Mat4::from_rotation_translation(rotation, centre).inverse();
+        let optical_to_view = Mat4::from_cols(Vec4::X, -Vec4::Y, -Vec4::Z, Vec4::W);
+        let projection = directx::perspective(2.0 * half_fov_y, aspect, 0.05, 200.0);
+        Self { view_projection: projection * optical_to_view * world_to_optical, position: centre }
+    }
+}
+
+/// The widest vertical half field of view an observer's view is drawn with, radians.
+pub const MAX_OBSERVER_HALF_FOV: f32 = 1.1;
 
 /// A camera orbiting `target` at `distance`, seen from heading `yaw` (about +Y; 0 looks along
 /// −Z from the +Z side) and elevation `pitch` (positive = from above).
@@ -161,6 +199,11 @@ impl OrbitCamera {
         self.projection(aspect) * self.view()
     }
 
+    /// This camera as a [`ViewPoint`] for a viewport of `aspect` = width / height.
+    pub fn view_point(&self, aspect: f32) -> ViewPoint {
+        ViewPoint { view_projection: self.view_projection(aspect), position: self.eye() }
+    }
+
     /// Pixel position (origin top-left, +y down) of world point `p` in a `width × height`
     /// viewport, or `None` behind the camera.
     pub fn project(&self, p: Vec3, width: f32, height: f32) -> Option<Vec2> {
@@ -265,5 +308,36 @@ mod tests {
             assert!(widest > 0.85, "aspect {aspect}: the box only reaches {widest} of the half-viewport");
         }
         assert!(Bounds::around([Vec3::NAN]).is_none());
+    }
+
+    #[test]
+    fn an_observer_view_sees_what_its_camera_sees() {
+        // A camera at (0, 1.6, 3) looking along −Z (optical +Z → world −Z, +Y down → world −Y).
+        let rotation = Quat::from_rotation_x(std::f32::consts::PI);
+        let centre = Vec3::new(0.0, 1.6, 3.0);
+        let view = ViewPoint::through_camera(rotation, centre, 0.5, 4.0 / 3.0);
+        let (w, h) = (640.0, 480.0);
+        // Straight ahead: the image centre.
+        let ahead = view.project(centre - Vec3::Z * 2.0, w, h).unwrap();
+        assert!((ahead - Vec2::new(320.0, 240.0)).length() < 1e-3, "{ahead}");
+        // Up in the world is up in the image; +X in the world (the camera's right) is right.
+        let up = view.project(centre + Vec3::new(0.0, 0.3, -2.0), w, h).unwrap();
+        assert!(up.y < 240.0 && (up.x - 320.0).abs() < 1e-3, "{up}");
+        let right = view.project(centre + Vec3::new(0.3, 0.0, -2.0), w, h).unwrap();
+        assert!(right.x > 320.0, "{right}");
+        // The half field of view reaches the image's top edge.
+        let edge = view.project(centre + Vec3::new(0.0, 2.0 * 0.5f32.tan(), -2.0), w, h).unwrap();
+        assert!(edge.y.abs() < 0.5, "{edge}");
+        // Behind the camera: nothing.
+        assert!(view.project(centre + Vec3::Z, w, h).is_none());
+        // A fisheye's field is clamped; nonsense is not drawn as nonsense.
+        let wide = ViewPoint::through_camera(rotation, centre, 1.5, 1.0);
+        let clamped = ViewPoint::through_camera(rotation, centre, MAX_OBSERVER_HALF_FOV, 1.0);
+        assert_eq!(wide, clamped);
+        assert!(ViewPoint::through_camera(rotation, centre, f32::NAN, f32::NAN).view_projection.is_finite());
+        // The orbit camera's view point projects like the camera.
+        let cam = OrbitCamera::default();
+        let p = Vec3::new(0.3, 1.2, -0.4);
+        assert_eq!(cam.view_point(w / h).project(p, w, h), cam.project(p, w, h));
     }
 }

@@ -46,6 +46,10 @@ pub const EGO_ONLY: Rgba = [0.78, 0.42, 1.00, 0.55];
 pub const GROUND_TRUTH: Rgba = [0.55, 0.95, 0.92, 0.33];
 /// Clear colour behind the scene (dark slate).
 pub const BACKGROUND: Rgba = [0.075, 0.085, 0.105, 1.0];
+/// The floor disc under the grid (a shade above the background, so shadows show on it).
+pub const FLOOR: Rgba = [0.15, 0.16, 0.19, 1.0];
+/// Contact shadows on the floor (drawn with a per-disc alpha).
+pub const SHADOW: Rgba = [0.0, 0.0, 0.0, 1.0];
 /// Minor floor grid lines.
 pub const GRID_MINOR: Rgba = [0.32, 0.34, 0.38, 0.45];
 /// Major floor grid lines (every metre).

@@ -25,6 +25,10 @@ pub enum ViewerError {
     BadSize { width: u32, height: u32, max: u32 },
     #[error("{what} must be a finite positive number, got {value}")]
     BadNumber { what: &'static str, value: f64 },
+    #[error(
+        "there is no observer {index} to look through: the scene has {count} (indices from 0; -1 for the orbit view)"
+    )]
+    NoSuchObserver { index: usize, count: usize },
     #[error("the GPU reported an error: {0}")]
     Gpu(String),
     #[error("the page refused: {0}")]

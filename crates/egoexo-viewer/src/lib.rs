@@ -81,13 +81,15 @@ pub mod error;
 pub mod example;
 pub mod mesh;
 pub mod playback;
+pub mod plots;
 pub mod scene;
+pub mod video;
 
 #[cfg(target_arch = "wasm32")]
 mod web;
 
 #[cfg(target_arch = "wasm32")]
-pub use web::{Viewer, WorkerClient, fragment_with_time, parse_fragment, share_fragment};
+pub use web::{Viewer, WorkerClient, fragment_with_time, mux_h264_mp4, parse_fragment, share_fragment};
 
 pub use error::{ActiveBackend, BackendPreference, ViewerError};
 

@@ -7,7 +7,7 @@
 
 use bytemuck::{Pod, Zeroable};
 use egoexo_core::exo_keypoints::{EXO_KEYPOINT_COUNT, ExoKeypoint};
-use egoexo_core::skeleton::NUM_JOINTS;
+use egoexo_core::skeleton::{MEAN_SHAPE_REST_JOINTS, NUM_JOINTS, PARENTS, SmplJoint};
 use egoexo_scene::{ObserverScene, SceneData};
 use glam::{Quat, Vec3};
 use thiserror::Error;
@@ -81,24 +81,29 @@ pub fn validate_scene(scene: &SceneData) -> Result<(), SceneError> {
     if problems.is_empty() { Ok(()) } else { Err(SceneError::Inconsistent(problems.join("; "))) }
 }
 
-/// One instanced solid: a sphere at `a` (then `b == a`) or a cylinder from `a` to `b`, world
-/// metres; `radius` metres; display-encoded colour. Layout shared with the shaders (48 bytes).
+/// One instanced solid: a sphere at `a` (then `b == a`) of `radius`, or a (tapered) cylinder
+/// from `a` (of `radius`) to `b` (of `radius_b`), world metres; display-encoded colour.
+/// Layout shared with the shaders (48 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct SolidInstance {
     pub a: [f32; 3],
     pub radius: f32,
     pub b: [f32; 3],
-    pub _pad: f32,
+    /// A cylinder's radius at `b`, metres (a sphere's equals `radius`).
+    pub radius_b: f32,
     pub colour: Rgba,
 }
 
 /// Everything drawn for one frame besides the static lines, split by pass: opaque solids
-/// write depth, translucent ones (alpha < 1) are blended over them.
+/// write depth; the floor's contact shadows (flat cylinders) blend over the floor; translucent
+/// solids (alpha < 1) are blended over them, nearest surface only (a depth pre-pass), so a
+/// translucent body shows one layer, not its overlapping capsules.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct FrameDrawList {
     pub spheres: Vec<SolidInstance>,
     pub cylinders: Vec<SolidInstance>,
+    pub shadows: Vec<SolidInstance>,
     pub translucent_spheres: Vec<SolidInstance>,
     pub translucent_cylinders: Vec<SolidInstance>,
 }
@@ -108,21 +113,37 @@ impl FrameDrawList {
         if !centre.is_finite() {
             return;
         }
-        let instance = SolidInstance { a: centre.to_array(), radius, b: centre.to_array(), _pad: 0.0, colour };
+        let instance = SolidInstance { a: centre.to_array(), radius, b: centre.to_array(), radius_b: radius, colour };
         if colour[3] < 1.0 { self.translucent_spheres.push(instance) } else { self.spheres.push(instance) }
     }
 
     fn cylinder(&mut self, a: Vec3, b: Vec3, radius: f32, colour: Rgba) {
+        self.cone(a, b, radius, radius, colour);
+    }
+
+    /// A cylinder from `a` (radius `radius_a`) to `b` (radius `radius_b`).
+    fn cone(&mut self, a: Vec3, b: Vec3, radius_a: f32, radius_b: f32, colour: Rgba) {
         if !(a.is_finite() && b.is_finite()) || a.distance_squared(b) < 1e-12 {
             return;
         }
-        let instance = SolidInstance { a: a.to_array(), radius, b: b.to_array(), _pad: 0.0, colour };
+        let instance = SolidInstance { a: a.to_array(), radius: radius_a, b: b.to_array(), radius_b, colour };
         if colour[3] < 1.0 { self.translucent_cylinders.push(instance) } else { self.cylinders.push(instance) }
+    }
+
+    /// A tapered capsule: the cone from `a` to `b` closed by a sphere at each end.
+    fn capsule(&mut self, a: Vec3, b: Vec3, radius_a: f32, radius_b: f32, colour: Rgba) {
+        self.cone(a, b, radius_a, radius_b, colour);
+        self.sphere(a, radius_a, colour);
+        self.sphere(b, radius_b, colour);
     }
 
     /// Number of instances over all passes.
     pub fn len(&self) -> usize {
-        self.spheres.len() + self.cylinders.len() + self.translucent_spheres.len() + self.translucent_cylinders.len()
+        self.spheres.len()
+            + self.cylinders.len()
+            + self.shadows.len()
+            + self.translucent_spheres.len()
+            + self.translucent_cylinders.len()
     }
 
     pub fn is_empty(&self) -> bool {
@@ -131,7 +152,12 @@ impl FrameDrawList {
 
     /// Every instance with its kind, for inspection.
     pub fn all(&self) -> impl Iterator<Item = &SolidInstance> {
-        self.spheres.iter().chain(&self.cylinders).chain(&self.translucent_spheres).chain(&self.translucent_cylinders)
+        self.spheres
+            .iter()
+            .chain(&self.cylinders)
+            .chain(&self.shadows)
+            .chain(&self.translucent_spheres)
+            .chain(&self.translucent_cylinders)
     }
 }
 
@@ -144,11 +170,16 @@ pub struct LayerToggles {
     pub ground_truth: bool,
     /// Observer rays.
     pub rays: bool,
+    /// Bodies of capsules (`false`: stick figures of thin joints and bones).
+    pub body: bool,
+    /// The observer whose camera the view looks through, if any: its own frustum and rays are
+    /// not drawn (they would fill its view); its keypoints are, in front of everything.
+    pub through_observer: Option<usize>,
 }
 
 impl Default for LayerToggles {
     fn default() -> Self {
-        Self { ego_only: false, ground_truth: true, rays: true }
+        Self { ego_only: false, ground_truth: true, rays: true, body: true, through_observer: None }
     }
 }
 
@@ -170,6 +201,104 @@ fn frame_joints(joints: &[f32], frame: usize) -> Option<[Vec3; NUM_JOINTS]> {
         return None;
     }
     Some(std::array::from_fn(|j| Vec3::new(flat[3 * j], flat[3 * j + 1], flat[3 * j + 2])))
+}
+
+/// The body's tapered capsules for the SMPL mean shape ([`MEAN_SHAPE_REST_JOINTS`], 1.70 m):
+/// per bone, indexed by its child joint, the radius at the parent's end and at the child's end,
+/// metres (index 0, the pelvis, has no bone). Scaled per subject by [`subject_scale`].
+pub const MEAN_SHAPE_BONE_RADII: [(f32, f32); NUM_JOINTS] = [
+    (0.0, 0.0),     // pelvis (root)
+    (0.085, 0.075), // pelvis → left hip
+    (0.085, 0.075), // pelvis → right hip
+    (0.105, 0.1),   // pelvis → spine1
+    (0.075, 0.05),  // left thigh
+    (0.075, 0.05),  // right thigh
+    (0.1, 0.105),   // spine1 → spine2
+    (0.05, 0.038),  // left shin
+    (0.05, 0.038),  // right shin
+    (0.105, 0.11),  // spine2 → spine3
+    (0.038, 0.03),  // left foot (its joint is 3 cm above the sole)
+    (0.038, 0.03),  // right foot
+    (0.065, 0.05),  // spine3 → neck
+    (0.07, 0.055),  // spine3 → left collar
+    (0.07, 0.055),  // spine3 → right collar
+    (0.05, 0.05),   // neck → head joint (the skull is a sphere above it)
+    (0.055, 0.05),  // left collar → shoulder
+    (0.055, 0.05),  // right collar → shoulder
+    (0.05, 0.04),   // left upper arm
+    (0.05, 0.04),   // right upper arm
+    (0.04, 0.03),   // left forearm
+    (0.04, 0.03),   // right forearm
+    (0.032, 0.03),  // left hand
+    (0.032, 0.03),  // right hand
+];
+/// The skull of the mean shape: a sphere of this radius, metres, centred this far beyond the
+/// head joint along the neck → head direction.
+pub const MEAN_SHAPE_SKULL: (f32, f32) = (0.1, 0.085);
+
+/// The subject's size relative to the SMPL mean shape: the summed length of its 23 bones over
+/// the mean shape's, the median over up to 64 frames spread over the session that hold a
+/// pose; 1 when none does. Bone lengths are the subject's (rest) shape, whatever the pose.
+pub fn subject_scale(joints: &[f32], frames: usize) -> f32 {
+    let mean_length = skeleton_length(&MEAN_SHAPE_REST_JOINTS.map(Vec3::from_array));
+    let stride = frames.div_ceil(64).max(1);
+    let mut ratios: Vec<f32> = (0..frames)
+        .step_by(stride)
+        .filter_map(|f| frame_joints(joints, f))
+        .map(|j| skeleton_length(&j) / mean_length)
+        .filter(|r| r.is_finite() && *r > 0.2 && *r < 5.0)
+        .collect();
+    if ratios.is_empty() {
+        return 1.0;
+    }
+    ratios.sort_by(f32::total_cmp);
+    ratios[ratios.len() / 2]
+}
+
+fn skeleton_length(joints: &[Vec3; NUM_JOINTS]) -> f32 {
+    (1..NUM_JOINTS).map(|j| joints[j].distance(joints[PARENTS[j] as usize])).sum()
+}
+
+/// A body of tapered capsules per SMPL bone ([`MEAN_SHAPE_BONE_RADII`] × `scale`) and a skull.
+fn push_body(list: &mut FrameDrawList, joints: &[Vec3; NUM_JOINTS], parents: &[i8], scale: f32, style: SkeletonStyle) {
+    let colour = |joint: usize| {
+        let c = style.colour.unwrap_or_else(|| BodySide::of_joint(joint).colour());
+        if style.dimmed { colors::dimmed(c) } else { c }
+    };
+    for (child, &parent) in parents.iter().enumerate().take(NUM_JOINTS) {
+        if let Ok(parent) = usize::try_from(parent)
+            && parent < NUM_JOINTS
+        {
+            let (ra, rb) = MEAN_SHAPE_BONE_RADII[child];
+            // A bone takes its child's side (pelvis → left_hip is a left bone).
+            list.capsule(joints[parent], joints[child], ra * scale, rb * scale, colour(child));
+        }
+    }
+    let head = SmplJoint::Head.index();
+    let up = (joints[head] - joints[SmplJoint::Neck.index()]).normalize_or(Vec3::Y);
+    let (radius, offset) = MEAN_SHAPE_SKULL;
+    list.sphere(joints[head] + up * offset * scale, radius * scale, colour(head));
+}
+
+/// Soft contact shadows on the floor at `floor_y` under the feet and the pelvis: concentric
+/// dark discs that fade as the joint rises (gone 0.5 m above the floor for a foot, 1.5 m for
+/// the pelvis).
+fn push_contact_shadows(list: &mut FrameDrawList, joints: &[Vec3; NUM_JOINTS], scale: f32, floor_y: f32) {
+    let spots = [(7, 0.09, 0.5), (8, 0.09, 0.5), (10, 0.08, 0.5), (11, 0.08, 0.5), (0, 0.28, 1.5)];
+    for (joint, radius, fade_m) in spots {
+        let p = joints[joint];
+        let height = p.y - floor_y;
+        let strength = (1.0 - height / fade_m).clamp(0.0, 1.0);
+        if !p.is_finite() || strength <= 0.0 {
+            continue;
+        }
+        let (a, b) = (Vec3::new(p.x, floor_y + 0.002, p.z), Vec3::new(p.x, floor_y + 0.0025, p.z));
+        for (size, alpha) in [(1.0, 0.12), (0.7, 0.14), (0.4, 0.16)] {
+            let r = radius * scale * size * (0.6 + 0.4 * strength);
+            let colour = colors::with_alpha(colors::SHADOW, alpha * strength);
+            list.shadows.push(SolidInstance { a: a.to_array(), radius: r, b: b.to_array(), radius_b: r, colour });
+        }
+    }
 }
 
 fn push_skeleton(list: &mut FrameDrawList, joints: &[Vec3; NUM_JOINTS], parents: &[i8], style: SkeletonStyle) {
@@ -207,8 +336,20 @@ pub fn observer_pose(o: &ObserverScene, frame: usize) -> Option<(Quat, Vec3)> {
     Some((q / norm, t))
 }
 
-fn push_observer(list: &mut FrameDrawList, o: &ObserverScene, index: usize, frame: usize, show_rays: bool) {
+/// Distance from an observer's camera at which its keypoints are drawn in its own view, metres
+/// (in front of the wearer, at the pixels where the keypoints were seen).
+pub const KEYPOINT_MARKER_DEPTH: f32 = 0.25;
+/// Angular radius of a keypoint marker in its observer's view, radians (a dot of a few pixels
+/// however far the wearer stands).
+pub const KEYPOINT_MARKER_ANGLE: f32 = 0.012;
+
+fn push_observer(list: &mut FrameDrawList, o: &ObserverScene, index: usize, frame: usize, layers: LayerToggles) {
     let Some((rotation, centre)) = observer_pose(o, frame) else { return };
+    if layers.through_observer == Some(index) {
+        push_keypoint_markers(list, o, frame, centre);
+        return;
+    }
+    let show_rays = layers.rays;
     let colour = colors::OBSERVERS[index % colors::OBSERVERS.len()];
     let [hx, hy] = o.half_fov.map(|a| a.clamp(0.05, MAX_DRAWN_HALF_FOV).tan() * FRUSTUM_DEPTH);
     let d = FRUSTUM_DEPTH;
@@ -244,35 +385,127 @@ fn push_observer(list: &mut FrameDrawList, o: &ObserverScene, index: usize, fram
     }
 }
 
-/// The instances of frame `frame` (clamped to the scene): the reconstruction (dimmed where the
-/// frame was not reconstructed), the optional ego-only overlay and ground-truth ghost, device
+/// What the viewer derives once per scene to draw any of its frames: the bodies' sizes, the
+/// floor's extent and whether the wearer walks about.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SceneGeometry {
+    /// [`subject_scale`] of the reconstruction (and of the ego-only overlay).
+    pub body_scale: f32,
+    /// [`subject_scale`] of the ground truth.
+    pub ground_truth_scale: f32,
+    /// Centre of the floor disc (world, at `floor_y`) and its radius, metres.
+    pub floor_centre: Vec3,
+    pub floor_radius: f32,
+    /// The wearer's pelvis covers more than [`MOVING_WEARER_M`] horizontally over the session:
+    /// the view follows it by default.
+    pub moving_wearer: bool,
+}
+
+/// Horizontal extent (the diagonal of the box the pelvis covers) beyond which a wearer counts
+/// as moving about, metres.
+pub const MOVING_WEARER_M: f32 = 1.5;
+
+impl SceneGeometry {
+    pub fn of(scene: &SceneData) -> Self {
+        let (floor_centre, floor_radius) = match scene_bounds(scene) {
+            Some(b) => {
+                let half = 0.5 * (b.max - b.min);
+                let c = b.centre();
+                (Vec3::new(c.x, scene.floor_y, c.z), (half.x.max(half.z) + 1.0).max(3.0))
+            }
+            None => (Vec3::new(0.0, scene.floor_y, 0.0), 3.0),
+        };
+        let stride = scene.frames.div_ceil(2000).max(1);
+        let pelvis = (0..scene.frames).step_by(stride).filter_map(|f| frame_joints(&scene.joints, f)).map(|j| j[0]);
+        let moving_wearer = Bounds::around(pelvis).is_some_and(|b| {
+            let extent = b.max - b.min;
+            extent.x.hypot(extent.z) > MOVING_WEARER_M
+        });
+        Self {
+            body_scale: subject_scale(&scene.joints, scene.frames),
+            ground_truth_scale: scene.ground_truth_joints.as_deref().map_or(1.0, |j| subject_scale(j, scene.frames)),
+            floor_centre,
+            floor_radius,
+            moving_wearer,
+        }
+    }
+}
+
+/// The point a following view keeps centred at `frame`: the reconstruction's pelvis, else the
+/// head device; `None` when neither is known then.
+pub fn follow_anchor(scene: &SceneData, frame: usize) -> Option<Vec3> {
+    let frame = frame.min(scene.frames.checked_sub(1)?);
+    if let Some(joints) = frame_joints(&scene.joints, frame)
+        && joints[0].is_finite()
+    {
+        return Some(joints[0]);
+    }
+    let head = scene.devices.iter().find(|d| d.name == "head")?;
+    if !head.valid.get(frame).copied().unwrap_or(false) {
+        return None;
+    }
+    let p = head.positions.get(3 * frame..3 * frame + 3)?;
+    Some(Vec3::new(p[0], p[1], p[2])).filter(|p| p.is_finite())
+}
+
+/// The keypoints of observer `o` at `frame` seen from its own camera at `centre`: a sphere on
+/// each ray [`KEYPOINT_MARKER_DEPTH`] from the camera (so it covers the keypoint's pixel
+/// whatever stands behind it), [`KEYPOINT_MARKER_ANGLE`] across, gate-coloured.
+fn push_keypoint_markers(list: &mut FrameDrawList, o: &ObserverScene, frame: usize, centre: Vec3) {
+    for k in 0..EXO_KEYPOINT_COUNT {
+        let at = 4 * (frame * EXO_KEYPOINT_COUNT + k);
+        let Some(r) = o.rays.get(at..at + 4) else { continue };
+        let (end, gate) = (Vec3::new(r[0], r[1], r[2]), r[3]);
+        if end == Vec3::ZERO && gate == 0.0 {
+            continue;
+        }
+        let distance = end.distance(centre);
+        if !(distance.is_finite() && distance > KEYPOINT_MARKER_DEPTH) {
+            continue;
+        }
+        let marker = centre + (end - centre) * (KEYPOINT_MARKER_DEPTH / distance);
+        list.sphere(marker, KEYPOINT_MARKER_DEPTH * KEYPOINT_MARKER_ANGLE, colors::gate_colour(gate));
+    }
+}
+
+/// The instances of frame `frame` (clamped to the scene): the floor and the wearer's contact
+/// shadows, the reconstruction (a body of capsules or a stick figure; dimmed where the frame
+/// was not reconstructed), the optional ego-only overlay and ground-truth ghost, device
 /// positions with a trail of [`TRAIL_S`], and each tracked observer's frustum and rays.
-pub fn build_frame(scene: &SceneData, frame: usize, layers: LayerToggles) -> FrameDrawList {
+/// `geometry` is [`SceneGeometry::of`] this scene.
+pub fn build_frame(scene: &SceneData, geometry: &SceneGeometry, frame: usize, layers: LayerToggles) -> FrameDrawList {
     let mut list = FrameDrawList::default();
     if scene.frames == 0 {
         return list;
     }
     let frame = frame.min(scene.frames - 1);
     let valid = scene.valid.get(frame).copied().unwrap_or(false);
+    // The floor: an opaque disc just under the grid lines.
+    let floor = geometry.floor_centre;
+    list.cylinder(floor - Vec3::Y * 0.004, floor - Vec3::Y * 0.003, geometry.floor_radius, colors::FLOOR);
+    let draw = |list: &mut FrameDrawList, joints: &[Vec3; NUM_JOINTS], scale: f32, style: SkeletonStyle| {
+        if layers.body {
+            push_body(list, joints, &scene.parents, scale, style);
+        } else {
+            push_skeleton(list, joints, &scene.parents, style);
+        }
+    };
     if let Some(joints) = frame_joints(&scene.joints, frame) {
-        push_skeleton(
-            &mut list,
-            &joints,
-            &scene.parents,
-            SkeletonStyle { thickness: 1.0, colour: None, dimmed: !valid },
-        );
+        let style = SkeletonStyle { thickness: 1.0, colour: None, dimmed: !valid };
+        draw(&mut list, &joints, geometry.body_scale, style);
+        push_contact_shadows(&mut list, &joints, geometry.body_scale, scene.floor_y);
     }
     if layers.ego_only
         && let Some(joints) = scene.ego_only_joints.as_deref().and_then(|j| frame_joints(j, frame))
     {
         let style = SkeletonStyle { thickness: 0.8, colour: Some(colors::EGO_ONLY), dimmed: !valid };
-        push_skeleton(&mut list, &joints, &scene.parents, style);
+        draw(&mut list, &joints, geometry.body_scale, style);
     }
     if layers.ground_truth
         && let Some(joints) = scene.ground_truth_joints.as_deref().and_then(|j| frame_joints(j, frame))
     {
         let style = SkeletonStyle { thickness: 1.25, colour: Some(colors::GROUND_TRUTH), dimmed: false };
-        push_skeleton(&mut list, &joints, &scene.parents, style);
+        draw(&mut list, &joints, geometry.ground_truth_scale, style);
     }
 
     let fps = scene.fps.max(1e-3);
@@ -301,7 +534,7 @@ pub fn build_frame(scene: &SceneData, frame: usize, layers: LayerToggles) -> Fra
     }
 
     for (index, observer) in scene.observers.iter().enumerate() {
-        push_observer(&mut list, observer, index, frame, layers.rays);
+        push_observer(&mut list, observer, index, frame, layers);
     }
     list
 }
@@ -326,6 +559,22 @@ pub fn view_bounds(scene: &SceneData, frame: usize) -> Option<Bounds> {
     let observers = scene.observers.iter().filter_map(|o| observer_pose(o, frame).map(|(_, t)| t));
     with_floor(Bounds::around(joints.chain(observers))?, scene.floor_y)
 }
+
+/// The box a following view frames at `frame`: the wearer's body now with room to move
+/// ([`FOLLOW_MARGIN_M`] around it), the observers tracked now, and the floor under them.
+pub fn follow_bounds(scene: &SceneData, frame: usize) -> Option<Bounds> {
+    let frame = frame.min(scene.frames.checked_sub(1)?);
+    let anchor = follow_anchor(scene, frame)?;
+    let body = frame_joints(&scene.joints, frame).map(|j| j.to_vec()).unwrap_or_else(|| vec![anchor]);
+    let margin = Vec3::new(FOLLOW_MARGIN_M, 0.0, FOLLOW_MARGIN_M);
+    let around = Bounds::around(body)?;
+    let observers = scene.observers.iter().filter_map(|o| observer_pose(o, frame).map(|(_, t)| t));
+    let corners = [around.min - margin, around.max + margin];
+    with_floor(Bounds::around(corners.into_iter().chain(observers))?, scene.floor_y)
+}
+
+/// Room left around the wearer by a following view, metres.
+pub const FOLLOW_MARGIN_M: f32 = 0.75;
 
 fn with_floor(bounds: Bounds, floor_y: f32) -> Option<Bounds> {
     let floor = Vec3::new(bounds.min.x, floor_y, bounds.min.z);
@@ -373,7 +622,14 @@ mod tests {
     #[cfg(target_arch = "wasm32")]
     use wasm_bindgen_test::wasm_bindgen_test as test;
 
-    const ALL_LAYERS: LayerToggles = LayerToggles { ego_only: true, ground_truth: true, rays: true };
+    const ALL_LAYERS: LayerToggles =
+        LayerToggles { ego_only: true, ground_truth: true, rays: true, body: false, through_observer: None };
+    const STICK_ONLY: LayerToggles =
+        LayerToggles { ego_only: false, ground_truth: false, rays: false, body: false, through_observer: None };
+
+    fn build_frame(scene: &SceneData, frame: usize, layers: LayerToggles) -> FrameDrawList {
+        super::build_frame(scene, &SceneGeometry::of(scene), frame, layers)
+    }
 
     #[test]
     fn the_example_scene_is_valid_and_survives_json() {
@@ -412,7 +668,7 @@ mod tests {
     #[test]
     fn a_valid_frame_draws_a_side_coloured_opaque_skeleton() {
         let scene = example_scene(10);
-        let list = build_frame(&scene, 3, LayerToggles { ego_only: false, ground_truth: false, rays: false });
+        let list = build_frame(&scene, 3, STICK_ONLY);
         let count = |c: Rgba| list.spheres.iter().filter(|s| s.colour == c).count();
         // 24 joints: 9 left, 9 right, 6 centre.
         assert_eq!((count(colors::LEFT), count(colors::RIGHT), count(colors::CENTRE)), (9, 9, 6));
@@ -429,7 +685,7 @@ mod tests {
     fn invalid_frames_are_dimmed_and_empty_frames_hidden() {
         let mut scene = example_scene(10);
         scene.valid[5] = false;
-        let layers = LayerToggles { ego_only: false, ground_truth: false, rays: false };
+        let layers = STICK_ONLY;
         let list = build_frame(&scene, 5, layers);
         let skeleton: Vec<_> = list.translucent_spheres.iter().filter(|s| s.radius >= JOINT_RADIUS).collect();
         assert_eq!(skeleton.len(), 24);
@@ -450,7 +706,7 @@ mod tests {
     #[test]
     fn layers_toggle_the_overlay_ghost_and_rays() {
         let scene = example_scene(6);
-        let none = build_frame(&scene, 2, LayerToggles { ego_only: false, ground_truth: false, rays: false });
+        let none = build_frame(&scene, 2, STICK_ONLY);
         let all = build_frame(&scene, 2, ALL_LAYERS);
         let with = |c: Rgba| all.all().filter(|s| s.colour == c).count();
         assert_eq!(with(colors::EGO_ONLY), 24 + 23);
@@ -510,7 +766,7 @@ mod tests {
     #[test]
     fn device_trails_follow_the_current_frame() {
         let scene = example_scene(200);
-        let list = build_frame(&scene, 100, LayerToggles::default());
+        let list = build_frame(&scene, 100, LayerToggles { body: false, ..LayerToggles::default() });
         let head = colors::HEAD_DEVICE;
         let past = list.cylinders.iter().filter(|s| s.colour == head).count();
         let future = list.translucent_cylinders.iter().filter(|s| s.colour == colors::with_alpha(head, 0.35)).count();
@@ -520,7 +776,7 @@ mod tests {
         // Invalid samples break the trail.
         let mut broken = scene.clone();
         broken.devices[0].valid[95] = false;
-        let list = build_frame(&broken, 100, LayerToggles::default());
+        let list = build_frame(&broken, 100, LayerToggles { body: false, ..LayerToggles::default() });
         assert_eq!(list.cylinders.iter().filter(|s| s.colour == head).count(), past - 2);
     }
 
@@ -561,5 +817,111 @@ mod tests {
         assert!(scene_bounds(&empty).is_none());
         assert!(view_bounds(&empty, 0).is_none());
         assert!(!static_lines(&empty).is_empty());
+    }
+
+    #[test]
+    fn the_body_is_capsules_sized_from_the_subjects_bones() {
+        let scene = example_scene(10);
+        let geometry = SceneGeometry::of(&scene);
+        // The example wearer is the mean shape itself.
+        assert!((geometry.body_scale - 1.0).abs() < 1e-4, "{}", geometry.body_scale);
+        let layers = LayerToggles { body: true, ..STICK_ONLY };
+        let list = super::build_frame(&scene, &geometry, 3, layers);
+        // 23 tapered cones, a sphere at each end, and the skull (besides the floor disc and
+        // the devices' balls and trails).
+        let body = [colors::LEFT, colors::RIGHT, colors::CENTRE];
+        let cones: Vec<_> = list.cylinders.iter().filter(|c| body.contains(&c.colour) && c.radius > 0.02).collect();
+        assert_eq!(cones.len(), 23);
+        assert_eq!(list.spheres.iter().filter(|c| body.contains(&c.colour) && c.radius > 0.02).count(), 2 * 23 + 1);
+        let knee = Vec3::from_slice(&scene.joints[(3 * 24 + 4) * 3..]);
+        let thigh = cones.iter().find(|c| Vec3::from(c.b) == knee).expect("the left thigh");
+        assert!((thigh.radius - MEAN_SHAPE_BONE_RADII[4].0).abs() < 1e-4);
+        assert!((thigh.radius_b - MEAN_SHAPE_BONE_RADII[4].1).abs() < 1e-4);
+        assert_eq!(thigh.colour, colors::LEFT);
+        // The skull's top is about the mean shape's stature above its soles.
+        let body_spheres = || list.spheres.iter().filter(|c| body.contains(&c.colour) && c.radius > 0.02);
+        let top = body_spheres().map(|s| s.a[1] + s.radius).fold(f32::MIN, f32::max);
+        let soles = body_spheres().map(|s| s.a[1] - s.radius).fold(f32::MAX, f32::min);
+        assert!((top - soles - 1.70).abs() < 0.06, "{top} - {soles}");
+        // The floor sits under the feet: the lowest sole touches it.
+        assert!((soles - scene.floor_y).abs() < 0.01, "soles {soles}, floor {}", scene.floor_y);
+
+        // A subject 10 % larger in every bone gets 10 % thicker capsules.
+        let mut big = scene.clone();
+        big.joints.iter_mut().for_each(|v| *v *= 1.1);
+        let big_geometry = SceneGeometry::of(&big);
+        assert!((big_geometry.body_scale - 1.1).abs() < 1e-3, "{}", big_geometry.body_scale);
+        let big_list = super::build_frame(&big, &big_geometry, 3, layers);
+        let big_knee = Vec3::from_slice(&big.joints[(3 * 24 + 4) * 3..]);
+        let big_thigh = big_list.cylinders.iter().find(|c| Vec3::from(c.b) == big_knee).unwrap();
+        assert!((big_thigh.radius - 1.1 * thigh.radius).abs() < 1e-4);
+        // No pose anywhere: the mean shape's size.
+        assert_eq!(subject_scale(&[0.0; 72], 1), 1.0);
+    }
+
+    #[test]
+    fn the_ghost_and_overlay_are_translucent_bodies_and_shadows_fade_with_height() {
+        let scene = example_scene(10);
+        let geometry = SceneGeometry::of(&scene);
+        let layers =
+            LayerToggles { ego_only: true, ground_truth: true, rays: false, body: true, through_observer: None };
+        let list = super::build_frame(&scene, &geometry, 2, layers);
+        let count = |c: Rgba| list.all().filter(|s| s.colour == c).count();
+        assert_eq!(count(colors::EGO_ONLY), 3 * 23 + 1);
+        assert_eq!(count(colors::GROUND_TRUTH), 3 * 23 + 1);
+        assert!(list.translucent_spheres.iter().all(|s| s.colour[3] < 1.0));
+        // Standing on the floor: shadows under both feet and the pelvis.
+        assert_eq!(list.shadows.len(), 5 * 3);
+        assert!(list.shadows.iter().all(|s| (s.a[1] - scene.floor_y) < 0.01 && s.colour[3] > 0.0));
+        // Lifted 0.3 m: fainter; lifted 2 m: none.
+        let shadow_alpha = |lift: f32| {
+            let mut lifted = scene.clone();
+            lifted.joints.chunks_mut(3).for_each(|p| p[1] += lift);
+            super::build_frame(&lifted, &geometry, 2, layers).shadows.iter().map(|s| s.colour[3]).sum::<f32>()
+        };
+        let (ground, low, high) = (shadow_alpha(0.0), shadow_alpha(0.3), shadow_alpha(2.0));
+        assert!(ground > low && low > 0.0 && high == 0.0, "{ground} {low} {high}");
+    }
+
+    #[test]
+    fn the_view_follows_a_walking_wearer() {
+        let standing = example_scene(30);
+        assert!(!SceneGeometry::of(&standing).moving_wearer, "20 cm of drift is not walking about");
+        let walking = example_scene(300); // 2 m along +Z over 10 s
+        assert!(SceneGeometry::of(&walking).moving_wearer);
+        let anchor = follow_anchor(&walking, 150).unwrap();
+        assert_eq!(anchor, crate::example::example_joints(150)[0]);
+        // Without a pose the head device anchors; past the end, the last frame.
+        let mut no_pose = walking.clone();
+        no_pose.joints[150 * 72..151 * 72].fill(0.0);
+        let head = &no_pose.devices[0].positions[3 * 150..3 * 151];
+        assert_eq!(follow_anchor(&no_pose, 150).unwrap(), Vec3::from_slice(head));
+        assert_eq!(follow_anchor(&walking, 10_000), follow_anchor(&walking, 299));
+        assert!(follow_anchor(&SceneData::new("e", 30.0, 0, "ego-exo"), 0).is_none());
+    }
+
+    #[test]
+    fn through_an_observer_its_keypoints_are_drawn_in_front_and_its_frustum_not() {
+        let scene = example_scene(4);
+        let through = LayerToggles { through_observer: Some(0), ..ALL_LAYERS };
+        let list = build_frame(&scene, 1, through);
+        assert!(list.all().all(|s| s.colour != colors::OBSERVERS[0]), "no frustum");
+        let (q, centre) = observer_pose(&scene.observers[0], 1).unwrap();
+        let markers: Vec<_> = list.spheres.iter().filter(|s| Vec3::from(s.a).distance(centre) < 0.3).collect();
+        assert_eq!(markers.len(), 13);
+        let view = crate::camera::ViewPoint::through_camera(q, centre, 0.75, 640.0 / 480.0);
+        // The observer looks at the wearer: the pelvis is near the middle of its view.
+        let pelvis = view.project(crate::example::example_joints(1)[0], 640.0, 480.0).unwrap();
+        assert!((pelvis - glam::Vec2::new(320.0, 240.0)).length() < 120.0, "{pelvis}");
+        for (k, marker) in markers.iter().enumerate() {
+            let ray = &scene.observers[0].rays[4 * (13 + k)..4 * (13 + k) + 4];
+            assert_eq!(marker.colour, colors::gate_colour(ray[3]));
+            // Each marker covers the pixel where its keypoint projects.
+            let at = view.project(Vec3::from(marker.a), 640.0, 480.0).unwrap();
+            let keypoint = view.project(Vec3::new(ray[0], ray[1], ray[2]), 640.0, 480.0).unwrap();
+            assert!(at.distance(keypoint) < 0.01, "{at} vs {keypoint}");
+        }
+        // No cylinder starts at the camera (its rays would fill its own view).
+        assert!(list.all().all(|s| Vec3::from(s.a) != centre));
     }
 }

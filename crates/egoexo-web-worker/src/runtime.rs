@@ -589,10 +589,10 @@ impl Runtime {
                         let computed = self.worker.borrow().run_pool_window(task, window)?;
                         outputs.push_window(computed);
                     }
-                    if windows.start >= windows.end {
-                        if let Some((outputs, _)) = own.take() {
-                            schedule.finished(None, outputs);
-                        }
+                    if windows.start >= windows.end
+                        && let Some((outputs, _)) = own.take()
+                    {
+                        schedule.finished(None, outputs);
                     }
                     self.yield_now().await;
                 }

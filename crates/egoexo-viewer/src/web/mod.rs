@@ -6,9 +6,11 @@ mod gpu;
 mod links;
 mod offscreen;
 mod renderer;
+mod video_export;
 mod viewer;
 mod worker_client;
 
 pub use links::{fragment_with_time, parse_fragment, share_fragment};
+pub use video_export::mux_h264_mp4;
 pub use viewer::Viewer;
 pub use worker_client::WorkerClient;

@@ -5,7 +5,7 @@
 use crate::camera::OrbitCamera;
 use crate::error::{BackendPreference, ViewerError};
 use crate::playback::Playback;
-use crate::scene::{LayerToggles, build_frame, parse_scene, static_lines, view_bounds};
+use crate::scene::{LayerToggles, SceneGeometry, build_frame, parse_scene, static_lines, view_bounds};
 
 use super::gpu::{self, Gpu};
 use super::renderer::Renderer;
@@ -62,7 +62,8 @@ pub(crate) async fn render_offscreen(
     });
     let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
     let view = texture.create_view(&Default::default());
-    renderer.render(&view, (width, height), &camera, &build_frame(&scene, frame, LayerToggles::default()));
+    let list = build_frame(&scene, &SceneGeometry::of(&scene), frame, LayerToggles::default());
+    renderer.render(&view, (width, height), &camera.view_point(aspect), &list);
     if let Some(error) = scope.pop().await {
         return Err(ViewerError::Gpu(error.to_string()));
     }

@@ -4,7 +4,7 @@
 
 use wgpu::util::DeviceExt;
 
-use crate::camera::OrbitCamera;
+use crate::camera::ViewPoint;
 use crate::colors;
 use crate::mesh::{self, LineVertex, MeshVertex};
 use crate::scene::{FrameDrawList, SolidInstance};
@@ -99,9 +99,23 @@ struct SizedTargets {
 struct Pipelines {
     spheres: wgpu::RenderPipeline,
     cylinders: wgpu::RenderPipeline,
+    /// Depth only (no colour): the translucent solids' pre-pass.
+    depth_spheres: wgpu::RenderPipeline,
+    depth_cylinders: wgpu::RenderPipeline,
     translucent_spheres: wgpu::RenderPipeline,
     translucent_cylinders: wgpu::RenderPipeline,
     lines: wgpu::RenderPipeline,
+}
+
+/// How a pipeline treats depth and colour.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Pass {
+    /// Writes depth and colour.
+    Opaque,
+    /// Writes depth only.
+    DepthOnly,
+    /// Tests depth, blends colour.
+    Translucent,
 }
 
 /// Draws the viewer's scene into textures of one colour format.
@@ -172,13 +186,8 @@ impl Renderer {
         });
 
         let mesh_attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3];
-        let instance_attributes =
-            wgpu::vertex_attr_array![2 => Float32x3, 3 => Float32, 4 => Float32x3, 5 => Float32x4];
-        let instance_attributes = [
-            instance_attributes[0],
-            instance_attributes[1],
-            wgpu::VertexAttribute { offset: 16, ..instance_attributes[2] },
-            wgpu::VertexAttribute { offset: 32, ..instance_attributes[3] },
+        let instance_attributes = wgpu::vertex_attr_array![
+            2 => Float32x3, 3 => Float32, 4 => Float32x3, 6 => Float32, 5 => Float32x4
         ];
         let solid_buffers = [
             Some(wgpu::VertexBufferLayout {
@@ -215,7 +224,7 @@ impl Renderer {
                         fragment_entry: &str,
                         buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
                         topology: wgpu::PrimitiveTopology,
-                        translucent: bool| {
+                        pass: Pass| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(&layout),
@@ -233,7 +242,7 @@ impl Renderer {
                 },
                 depth_stencil: Some(wgpu::DepthStencilState {
                     format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(!translucent),
+                    depth_write_enabled: Some(pass != Pass::Translucent),
                     depth_compare: Some(wgpu::CompareFunction::LessEqual),
                     stencil: Default::default(),
                     bias: Default::default(),
@@ -245,8 +254,12 @@ impl Renderer {
                     compilation_options: Default::default(),
                     targets: &[Some(wgpu::ColorTargetState {
                         format,
-                        blend: translucent.then_some(blend),
-                        write_mask: wgpu::ColorWrites::ALL,
+                        blend: (pass == Pass::Translucent).then_some(blend),
+                        write_mask: if pass == Pass::DepthOnly {
+                            wgpu::ColorWrites::empty()
+                        } else {
+                            wgpu::ColorWrites::ALL
+                        },
                     })],
                 }),
                 multiview_mask: None,
@@ -255,15 +268,31 @@ impl Renderer {
         };
         let triangles = wgpu::PrimitiveTopology::TriangleList;
         let pipelines = Pipelines {
-            spheres: pipeline("spheres", "vs_sphere", "fs_solid", &solid_buffers, triangles, false),
-            cylinders: pipeline("cylinders", "vs_cylinder", "fs_solid", &solid_buffers, triangles, false),
+            spheres: pipeline("spheres", "vs_sphere", "fs_solid", &solid_buffers, triangles, Pass::Opaque),
+            cylinders: pipeline("cylinders", "vs_cylinder", "fs_solid", &solid_buffers, triangles, Pass::Opaque),
+            depth_spheres: pipeline(
+                "depth spheres",
+                "vs_sphere",
+                "fs_solid",
+                &solid_buffers,
+                triangles,
+                Pass::DepthOnly,
+            ),
+            depth_cylinders: pipeline(
+                "depth cylinders",
+                "vs_cylinder",
+                "fs_solid",
+                &solid_buffers,
+                triangles,
+                Pass::DepthOnly,
+            ),
             translucent_spheres: pipeline(
                 "translucent spheres",
                 "vs_sphere",
                 "fs_solid",
                 &solid_buffers,
                 triangles,
-                true,
+                Pass::Translucent,
             ),
             translucent_cylinders: pipeline(
                 "translucent cylinders",
@@ -271,9 +300,16 @@ impl Renderer {
                 "fs_solid",
                 &solid_buffers,
                 triangles,
-                true,
+                Pass::Translucent,
             ),
-            lines: pipeline("lines", "vs_line", "fs_line", &line_buffers, wgpu::PrimitiveTopology::LineList, true),
+            lines: pipeline(
+                "lines",
+                "vs_line",
+                "fs_line",
+                &line_buffers,
+                wgpu::PrimitiveTopology::LineList,
+                Pass::Translucent,
+            ),
         };
 
         Self {
@@ -284,8 +320,8 @@ impl Renderer {
             globals,
             bind_group,
             pipelines,
-            sphere: GpuMesh::new(device, &mesh::unit_sphere(10, 16), "sphere"),
-            cylinder: GpuMesh::new(device, &mesh::unit_cylinder(14), "cylinder"),
+            sphere: GpuMesh::new(device, &mesh::unit_sphere(14, 24), "sphere"),
+            cylinder: GpuMesh::new(device, &mesh::unit_cylinder(24), "cylinder"),
             instances: GrowableBuffer::new(device, "instances"),
             lines: GrowableBuffer::new(device, "lines"),
             line_vertex_count: 0,
@@ -319,25 +355,25 @@ impl Renderer {
         SizedTargets { size, msaa, depth: texture("depth", DEPTH_FORMAT) }
     }
 
-    /// Draws `list` and the static lines as seen by `camera` into `target` (a view of a texture
+    /// Draws `list` and the static lines as seen from `view_point` into `target` (a view of a texture
     /// of this renderer's format, `size` pixels) and submits the work.
     pub(crate) fn render(
         &mut self,
         target: &wgpu::TextureView,
         size: (u32, u32),
-        camera: &OrbitCamera,
+        view_point: &ViewPoint,
         list: &FrameDrawList,
     ) {
-        let aspect = size.0 as f32 / size.1.max(1) as f32;
         let srgb = self.format.is_srgb();
         let globals = Globals {
-            view_proj: camera.view_projection(aspect).to_cols_array_2d(),
-            eye: camera.eye().extend(1.0).to_array(),
+            view_proj: view_point.view_projection.to_cols_array_2d(),
+            eye: view_point.position.extend(1.0).to_array(),
             params: [if srgb { 1.0 } else { 0.0 }, 0.0, 0.0, 0.0],
         };
         self.queue.write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
 
-        let groups = [&list.spheres, &list.cylinders, &list.translucent_spheres, &list.translucent_cylinders];
+        let groups =
+            [&list.spheres, &list.cylinders, &list.shadows, &list.translucent_spheres, &list.translucent_cylinders];
         let all: Vec<SolidInstance> = groups.iter().flat_map(|g| g.iter().copied()).collect();
         self.instances.write(&self.device, &self.queue, bytemuck::cast_slice(&all));
         let mut start = 0u32;
@@ -393,9 +429,14 @@ impl Renderer {
                 pass.set_vertex_buffer(0, self.lines.buffer.slice(..));
                 pass.draw(0..self.line_vertex_count, 0..1);
             }
+            // Contact shadows blend over the floor and each other; then the translucent solids:
+            // their nearest surface's depth first, then their colour where they are nearest.
             let passes = [
-                (&p.translucent_spheres, &self.sphere, ranges[2].clone()),
-                (&p.translucent_cylinders, &self.cylinder, ranges[3].clone()),
+                (&p.translucent_cylinders, &self.cylinder, ranges[2].clone()),
+                (&p.depth_spheres, &self.sphere, ranges[3].clone()),
+                (&p.depth_cylinders, &self.cylinder, ranges[4].clone()),
+                (&p.translucent_spheres, &self.sphere, ranges[3].clone()),
+                (&p.translucent_cylinders, &self.cylinder, ranges[4].clone()),
             ];
             for (pipeline, mesh, range) in passes {
                 draw_instanced(&mut pass, pipeline, mesh, &self.instances.buffer, range);

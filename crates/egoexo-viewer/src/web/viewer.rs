@@ -8,10 +8,16 @@ use egoexo_scene::SceneData;
 use wasm_bindgen::prelude::*;
 use web_sys::{Event, EventTarget, HtmlCanvasElement, KeyboardEvent, PointerEvent, WheelEvent};
 
-use crate::camera::OrbitCamera;
+use glam::Vec3;
+
+use crate::camera::{OrbitCamera, ViewPoint};
 use crate::error::{ActiveBackend, BackendPreference, ViewerError};
 use crate::playback::Playback;
-use crate::scene::{FrameDrawList, LayerToggles, build_frame, parse_scene, static_lines, view_bounds};
+use crate::plots::{PlotLayout, describe_frame, frame_at, render_plots};
+use crate::scene::{
+    FrameDrawList, LayerToggles, SceneGeometry, build_frame, follow_anchor, follow_bounds, observer_pose, parse_scene,
+    static_lines, view_bounds,
+};
 
 use super::gpu::{self, Gpu};
 use super::renderer::Renderer;
@@ -61,7 +67,7 @@ impl CanvasTarget {
 
     /// Draws `list` seen by `camera` and presents it. `false` when the canvas gave no texture
     /// this time (draw again on the next animation frame).
-    fn draw(&mut self, camera: &OrbitCamera, list: &FrameDrawList) -> Result<bool, ViewerError> {
+    fn draw(&mut self, view_point: &ViewPoint, list: &FrameDrawList) -> Result<bool, ViewerError> {
         let frame = match self.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(frame) | wgpu::CurrentSurfaceTexture::Suboptimal(frame) => frame,
             wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
@@ -74,7 +80,7 @@ impl CanvasTarget {
             }
         };
         let view = frame.texture.create_view(&Default::default());
-        self.renderer.render(&view, (self.config.width, self.config.height), camera, list);
+        self.renderer.render(&view, (self.config.width, self.config.height), view_point, list);
         self.gpu.queue.present(frame);
         Ok(true)
     }
@@ -224,7 +230,16 @@ struct State {
     target: CanvasTarget,
     canvas_listeners: Listeners,
     scene: Option<SceneData>,
+    /// [`SceneGeometry::of`] the scene.
+    geometry: Option<SceneGeometry>,
     camera: OrbitCamera,
+    /// The orbit camera's target follows the wearer: target = follow anchor (x, z) + offset
+    /// (whose y is the target's height).
+    follow: bool,
+    follow_offset: Vec3,
+    /// Set once the page chose follow on or off; until then each scene decides
+    /// ([`SceneGeometry::moving_wearer`]).
+    follow_chosen: bool,
     playback: Playback,
     layers: LayerToggles,
     /// CSS size of the canvas (pixels) and the device pixel ratio.
@@ -255,6 +270,14 @@ impl State {
         self.playback = Playback::new(scene.frames, f64::from(scene.fps));
         self.playback.set_speed(speed)?;
         self.target.renderer.set_static_lines(&static_lines(&scene));
+        let geometry = SceneGeometry::of(&scene);
+        if !self.follow_chosen {
+            self.follow = geometry.moving_wearer;
+        }
+        if self.layers.through_observer.is_some_and(|i| i >= scene.observers.len()) {
+            self.layers.through_observer = None;
+        }
+        self.geometry = Some(geometry);
         self.scene = Some(scene);
         self.scene_generation += 1;
         self.dirty = true;
@@ -264,20 +287,66 @@ impl State {
         Ok(())
     }
 
+    /// Frames the scene at the shown frame: the wearer's whole session and the observers, or,
+    /// when following, the wearer and the observers now.
     fn reset_camera(&mut self) {
         let aspect = self.aspect();
         let frame = self.playback.frame();
-        let bounds = self.scene.as_ref().and_then(|scene| view_bounds(scene, frame));
+        let bounds = self
+            .scene
+            .as_ref()
+            .and_then(|scene| if self.follow { follow_bounds(scene, frame) } else { view_bounds(scene, frame) });
         self.camera = bounds.map(|b| OrbitCamera::framing(b, aspect)).unwrap_or_default();
+        self.follow_offset = self.camera.target - self.anchor().unwrap_or(Vec3::ZERO);
+        self.follow_offset.y = self.camera.target.y;
         self.dirty = true;
     }
 
+    /// The followed point at the shown frame, with y = 0 (the view keeps its height).
+    fn anchor(&self) -> Option<Vec3> {
+        let anchor = follow_anchor(self.scene.as_ref()?, self.playback.frame())?;
+        Some(Vec3::new(anchor.x, 0.0, anchor.z))
+    }
+
+    /// Where this frame is drawn from: the observer looked through (when it is tracked now),
+    /// else the orbit camera, moved with the wearer when following.
+    fn view_point(&mut self) -> ViewPoint {
+        let aspect = self.aspect();
+        if let (Some(index), Some(scene)) = (self.layers.through_observer, &self.scene)
+            && let Some(observer) = scene.observers.get(index)
+            && let Some((rotation, centre)) = observer_pose(observer, self.playback.frame())
+        {
+            return ViewPoint::through_camera(rotation, centre, observer.half_fov[1], aspect);
+        }
+        if self.follow
+            && let Some(anchor) = self.anchor()
+        {
+            self.camera.target = anchor + self.follow_offset;
+        }
+        self.camera.view_point(aspect)
+    }
+
+    /// The layers for this frame: looking through an observer that is not tracked now falls
+    /// back to the orbit view, which shows that observer's frustum as usual.
+    fn frame_layers(&self) -> LayerToggles {
+        let mut layers = self.layers;
+        let frame = self.playback.frame();
+        if let Some(index) = layers.through_observer
+            && self.scene.as_ref().and_then(|s| s.observers.get(index)).and_then(|o| observer_pose(o, frame)).is_none()
+        {
+            layers.through_observer = None;
+        }
+        layers
+    }
+
     fn draw(&mut self) -> Result<(), ViewerError> {
-        let list = match &self.scene {
-            Some(scene) => build_frame(scene, self.playback.frame(), self.layers),
-            None => FrameDrawList::default(),
+        let view_point = self.view_point();
+        let layers = self.frame_layers();
+        let list = match (&self.scene, &self.geometry) {
+            (Some(scene), Some(geometry)) => build_frame(scene, geometry, self.playback.frame(), layers),
+            _ => FrameDrawList::default(),
         };
-        if self.target.draw(&self.camera, &list)? {
+        if self.target.draw(&view_point, &list)? {
             self.dirty = false;
         }
         Ok(())
@@ -490,11 +559,17 @@ fn attach_canvas_listeners(weak: &Weak<RefCell<State>>, canvas: &HtmlCanvasEleme
                 let now = (e.client_x() as f32, e.client_y() as f32);
                 let (dx, dy) = (now.0 - drag.last.0, now.1 - drag.last.1);
                 drag.last = now;
+                if s.layers.through_observer.is_some() {
+                    return; // an observer's view stays where its camera is
+                }
                 match drag.mode {
                     DragMode::Orbit => s.camera.orbit(dx, dy),
                     DragMode::Pan => {
                         let height = s.css_size.1;
-                        s.camera.pan(dx, dy, height)
+                        let before = s.camera.target;
+                        s.camera.pan(dx, dy, height);
+                        // Following: the pan moves the view relative to the wearer.
+                        s.follow_offset += s.camera.target - before;
                     }
                 }
                 s.dirty = true;
@@ -632,7 +707,11 @@ impl Viewer {
             target,
             canvas_listeners: Listeners::default(),
             scene: None,
+            geometry: None,
             camera: OrbitCamera::default(),
+            follow: false,
+            follow_offset: Vec3::ZERO,
+            follow_chosen: false,
             playback: Playback::new(0, 30.0),
             layers: LayerToggles::default(),
             css_size,
@@ -758,6 +837,90 @@ impl Viewer {
         })
     }
 
+    /// Draws bodies of capsules (`true`, the default) or stick figures.
+    pub fn set_show_body(&self, show: bool) -> Result<(), JsError> {
+        self.update(|s| {
+            s.layers.body = show;
+            Ok(())
+        })
+    }
+
+    /// Keeps the wearer centred as it moves (the view turns only when the user turns it).
+    /// Until the page sets it, each scene decides: on for a wearer who walks about.
+    pub fn set_follow(&self, follow: bool) -> Result<(), JsError> {
+        self.update(|s| {
+            s.follow_chosen = true;
+            if s.follow != follow {
+                s.follow = follow;
+                s.reset_camera();
+            }
+            Ok(())
+        })
+    }
+
+    /// Whether the view follows the wearer.
+    pub fn follows(&self) -> bool {
+        self.read(|s| s.follow)
+    }
+
+    /// The scene's observers' ids, in order (the indices of [`Viewer::set_view_from_observer`]).
+    pub fn observer_ids(&self) -> Vec<String> {
+        self.read(|s| {
+            s.scene.as_ref().map(|sc| sc.observers.iter().map(|o| o.id.clone()).collect()).unwrap_or_default()
+        })
+    }
+
+    /// Looks through observer `index`'s camera (its frustum becomes the view, its keypoints are
+    /// drawn over it); `-1` returns to the orbit view. Throws for an observer the scene lacks.
+    /// While the observer is not tracked the orbit view is shown.
+    pub fn set_view_from_observer(&self, index: i32) -> Result<(), JsError> {
+        self.update(|s| {
+            let count = s.scene.as_ref().map_or(0, |sc| sc.observers.len());
+            s.layers.through_observer = match usize::try_from(index) {
+                Err(_) => None,
+                Ok(i) if i < count => Some(i),
+                Ok(i) => return Err(ViewerError::NoSuchObserver { index: i, count }),
+            };
+            Ok(())
+        })
+    }
+
+    /// The observer looked through, or `-1` for the orbit view.
+    pub fn view_from_observer(&self) -> i32 {
+        self.read(|s| s.layers.through_observer.map_or(-1, |i| i as i32))
+    }
+
+    /// The timeline plots' rows for the scene: `{ rows: [{ kind, label, top, height, index }],
+    /// height, error_max_cm }` in pixels from the plots' top (no rows without a scene or its
+    /// timeline data).
+    pub fn plot_layout(&self) -> Result<JsValue, JsError> {
+        let layout = self.read(|s| s.scene.as_ref().map(PlotLayout::of));
+        let layout = layout.unwrap_or(PlotLayout { rows: Vec::new(), height: 0, error_max_cm: 0.0 });
+        serde_wasm_bindgen::to_value(&layout).map_err(|e| JsError::new(&e.to_string()))
+    }
+
+    /// The timeline plots drawn `width` pixels wide (the layout's height tall) as RGBA bytes,
+    /// rows top to bottom, for an `ImageData`; one pixel column per slice of frames.
+    pub fn plot_image(&self, width: u32) -> Result<js_sys::Uint8ClampedArray, JsError> {
+        if width == 0 || width > 8192 {
+            return Err(js_error(ViewerError::BadSize { width, height: 1, max: 8192 }));
+        }
+        let pixels = self.read(|s| {
+            s.scene.as_ref().map(|scene| render_plots(scene, &PlotLayout::of(scene), width).pixels).unwrap_or_default()
+        });
+        Ok(js_sys::Uint8ClampedArray::from(pixels.as_slice()))
+    }
+
+    /// The frame under `x` pixels of a plot `width` pixels wide (what a click there seeks to).
+    pub fn plot_frame_at(&self, x: f64, width: f64) -> usize {
+        self.read(|s| frame_at(x as f32, width as f32, s.playback.frames()))
+    }
+
+    /// The plots' values at `frame`, one line per row (the hover text).
+    pub fn plot_text(&self, frame: usize) -> String {
+        self.read(|s| s.scene.as_ref().map(|scene| describe_frame(scene, frame)).unwrap_or_default())
+    }
+
     pub fn play(&self) -> Result<(), JsError> {
         self.update(|s| {
             s.playback.play();
@@ -809,6 +972,11 @@ impl Viewer {
             s.playback.set_loop(Some((start, end)));
             Ok(())
         })
+    }
+
+    /// The looped frames `[start, end]`, or `undefined` when the whole timeline plays.
+    pub fn loop_range(&self) -> Option<Vec<u32>> {
+        self.read(|s| s.playback.loop_range().map(|(a, b)| vec![a as u32, b as u32]))
     }
 
     /// Plays the whole timeline again.

@@ -1,5 +1,5 @@
-// The viewer's shaders: instanced spheres and cylinders (lit with a head light plus a sky
-// light), and coloured world-space lines. Positions are world metres, Y up.
+// The viewer's shaders: instanced spheres and (tapered) cylinders (lit with a head light plus a
+// sky light), and coloured world-space lines. Positions are world metres, Y up.
 
 struct Globals {
     view_proj: mat4x4<f32>,
@@ -15,11 +15,13 @@ struct SolidIn {
     // Mesh vertex (unit sphere, or unit cylinder along +Y from 0 to 1).
     @location(0) position: vec3<f32>,
     @location(1) normal: vec3<f32>,
-    // Instance: sphere centre / cylinder start, radius, cylinder end, colour.
+    // Instance: sphere centre / cylinder start, radius (at the start), cylinder end, colour,
+    // the cylinder's radius at its end (tapered capsules of the body).
     @location(2) a: vec3<f32>,
     @location(3) radius: f32,
     @location(4) b: vec3<f32>,
     @location(5) colour: vec4<f32>,
+    @location(6) radius_b: f32,
 };
 
 struct SolidOut {
@@ -55,9 +57,16 @@ fn vs_cylinder(v: SolidIn) -> SolidOut {
     }
     let x = normalize(cross(helper, y));
     let z = cross(x, y);
+    // The radius runs from `radius` at a to `radius_b` at b; a side's normal tilts towards the
+    // narrower end by the taper (caps keep their axial normals).
+    let r = mix(v.radius, v.radius_b, v.position.y);
+    var n = v.normal;
+    if (abs(n.y) < 0.5) {
+        n = normalize(vec3<f32>(n.x * len, v.radius - v.radius_b, n.z * len));
+    }
     var out: SolidOut;
-    out.world = v.a + x * (v.position.x * v.radius) + y * (v.position.y * len) + z * (v.position.z * v.radius);
-    out.normal = x * v.normal.x + y * v.normal.y + z * v.normal.z;
+    out.world = v.a + x * (v.position.x * r) + y * (v.position.y * len) + z * (v.position.z * r);
+    out.normal = x * n.x + y * n.y + z * n.z;
     out.clip = globals.view_proj * vec4<f32>(out.world, 1.0);
     out.colour = v.colour;
     return out;

@@ -290,6 +290,46 @@ fn the_scene_holds_everything_the_viewer_draws() {
     assert!(scene.observers.iter().any(|o| o.rays.chunks(4).any(|r| r[3] > 0.0)), "some ray has a gate");
 }
 
+/// The timeline plots' series agree with the rest of the scene and with the summary: the
+/// per-frame errors average to the summary's MPJPE, a frame's mean gate is its rays' mean,
+/// and an observer with keypoints at a frame has the wearer in view then.
+#[test]
+fn the_timeline_series_agree_with_the_scene_and_the_summary() {
+    let (worker, _) = reconstructed();
+    let scene: SceneData = serde_json::from_slice(&worker.scene_json().unwrap()).unwrap();
+    let timeline = scene.timeline.as_ref().expect("the scene has its timeline");
+    assert!(timeline.check(scene.frames, scene.observers.len()).is_empty());
+    let summary = worker.reconstruction_summary().unwrap();
+    let accuracy = summary.accuracy.as_ref().unwrap();
+    let errors = timeline.errors.as_ref().expect("the fixture has ground truth");
+    let mean = |v: &[f32]| {
+        let scored: Vec<f64> = v.iter().filter(|e| **e >= 0.0).map(|&e| f64::from(e)).collect();
+        (scored.len(), scored.iter().sum::<f64>() / scored.len() as f64)
+    };
+    let (scored, mpjpe) = mean(&errors.mpjpe_cm);
+    assert_eq!(scored, accuracy.frames);
+    assert!((mpjpe - accuracy.ego_exo_mpjpe_cm).abs() < 1e-3, "{mpjpe} vs {}", accuracy.ego_exo_mpjpe_cm);
+    let (_, ego_only) = mean(errors.ego_only_mpjpe_cm.as_ref().unwrap());
+    assert!((ego_only - accuracy.ego_only_mpjpe_cm.unwrap()).abs() < 1e-3);
+    for (o, series) in scene.observers.iter().zip(&timeline.observers) {
+        assert_eq!(o.id, series.id);
+        let mut seen = 0;
+        for f in 0..scene.frames {
+            let rays = &o.rays[52 * f..52 * (f + 1)];
+            let gates: Vec<f32> = rays.chunks(4).filter(|r| r.iter().any(|&v| v != 0.0)).map(|r| r[3]).collect();
+            if gates.is_empty() {
+                assert_eq!(series.gate_mean[f], -1.0, "{} frame {f}", o.id);
+            } else {
+                let expected = gates.iter().sum::<f32>() / gates.len() as f32;
+                assert!((series.gate_mean[f] - expected).abs() < 1e-6);
+                seen += 1;
+                assert!(series.joints_in_view[f] > 0, "{} frame {f}: rays but the wearer not in view", o.id);
+            }
+        }
+        assert!(seen > scene.frames / 4, "{}: rays in {seen} of {} frames", o.id, scene.frames);
+    }
+}
+
 #[test]
 fn cancelling_stops_the_job_and_keeps_no_result() {
     let mut worker = worker_with_models();

@@ -1,7 +1,7 @@
 // The bench page: the sample through the app's worker, N timed reconstructions, medians.
 // Messages go through the page's WorkerClient, as in the app.
 
-import initViewer, { WorkerClient } from './pkg/egoexo_viewer.js';
+import initViewer, { Viewer, WorkerClient } from './pkg/egoexo_viewer.js';
 
 const params = new URLSearchParams(location.search);
 const runs = Math.max(1, Number(params.get('runs') ?? 5));
@@ -80,11 +80,13 @@ async function main() {
   // glue passes in) of a fresh open (import, align) and the whole job, plus an npz export
   // timed here from request to file.
   const stageRuns = [];
+  let scene = null;
   for (let i = 0; i < runs; i += 1) {
     egoExo.push(await time(false));
     await request((c) => c.open_archive(sample.file, bytes.slice()));
     const started = performance.now();
-    const { summary: job } = await request((c) => c.reconstruct(true));
+    const { summary: job, scene: jobScene } = await request((c) => c.reconstruct(true));
+    scene = jobScene;
     appJob.push(performance.now() - started);
     const exportStarted = performance.now();
     await request((c) => c.export('npz'));
@@ -123,9 +125,49 @@ async function main() {
   say(`median whole job: ${result.median_app_fps.toFixed(0)} frames/s (${result.median_app_ms.toFixed(0)} ms)`);
   say(`median whole job, ${poolSize} workers: ${result.median_pool_fps.toFixed(0)} frames/s (${result.median_pool_ms.toFixed(0)} ms), `
     + `${result.pool_speedup.toFixed(2)}× one worker`);
+  result.render = await renderBench(scene, Math.max(30, 20 * runs));
   result.networks = await compareNetworks(summary.tracking_points, Math.max(10, 4 * runs));
   document.body.dataset.result = JSON.stringify(result);
   document.body.dataset.state = 'done';
+}
+
+// The 3D view's frame time for the sample's scene on a 960×540 canvas: bodies of capsules
+// against stick figures, alternating, `frames` frames each (the viewer draws a frame, then the
+// canvas is read into an ImageBitmap, so the GPU's work is in the time).
+async function renderBench(sceneBytes, frames) {
+  const canvas = document.createElement('canvas');
+  canvas.width = 960;
+  canvas.height = 540;
+  canvas.style.cssText = 'width: 960px; height: 540px; position: absolute; left: -10000px;';
+  document.body.append(canvas);
+  const viewer = await Viewer.create(canvas, params.get('backend') ?? 'auto');
+  viewer.set_scene_json(sceneBytes);
+  viewer.pause();
+  const drawn = viewer.canvas();
+  const times = { body: [], stick: [] };
+  const total = viewer.frames();
+  for (let i = 0; i < 2 * frames; i += 1) {
+    const mode = i % 2 === 0 ? 'body' : 'stick';
+    viewer.set_show_body(mode === 'body');
+    viewer.seek((i * 7) % total);
+    const started = performance.now();
+    viewer.render_now();
+    (await createImageBitmap(drawn)).close();
+    times[mode].push(performance.now() - started);
+  }
+  const result = {
+    backend: viewer.backend(),
+    width: drawn.width,
+    height: drawn.height,
+    frames,
+    body_ms: median(times.body.slice(2)),
+    stick_ms: median(times.stick.slice(2)),
+  };
+  viewer.free();
+  drawn.remove();
+  say(`3D view (${result.backend}, ${result.width}×${result.height}): body ${result.body_ms.toFixed(2)} ms a frame, `
+    + `stick figure ${result.stick_ms.toFixed(2)} ms (median of ${frames} each)`);
+  return result;
 }
 
 // The engines side by side on the same networks and inputs, in a worker of their own

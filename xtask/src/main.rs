@@ -6,8 +6,9 @@
 //!   native tests of the workspace (with `EGOEXO_PYTHON` and `EGOEXO_NODE_MODULES` set),
 //!   then the browser tests (wasm-bindgen-test in headless Chromium), builds the web app and
 //!   runs its end-to-end tests (Playwright) and bench page, and prints the counts.
-//! - `cargo xtask serve` — builds the web app into `dist/` (both wasm modules, wasm-bindgen,
-//!   wasm-opt, `web/` + `public/` + the models) and serves it on http://127.0.0.1:8080/.
+//! - `cargo xtask serve` — builds the web app into `dist/` (both wasm modules with the shipped
+//!   profile `wasm-dist`, wasm-bindgen, `web/` + `public/` + the models) and serves it on
+//!   http://127.0.0.1:8080/.
 //! - `cargo xtask dist` — only builds `dist/`; `cargo xtask bench-web` — runs the bench page.
 
 mod cmd;
@@ -73,23 +74,29 @@ struct AppArgs {
     /// Models folder (manifest.json + ONNX files); default: EGOEXO_MODELS, else models/.
     #[arg(long)]
     models: Option<PathBuf>,
-    /// Skip wasm-opt even when it is available.
+    /// Run wasm-opt (npm `binaryen`) on the modules: smaller raw, larger gzipped on the LTO
+    /// build (docs/performance.md), so off by default.
     #[arg(long)]
-    no_wasm_opt: bool,
+    wasm_opt: bool,
+    /// The tests' build of the modules (profile wasm-release: no LTO, function names kept):
+    /// much quicker to rebuild after a change, a few per cent faster, 40 % larger.
+    #[arg(long)]
+    test_build: bool,
 }
 
 impl AppArgs {
     /// Builds dist/ and prints the module sizes.
     fn build(&self, root: &Path) -> Result<()> {
         let models = web::models_dir(root, self.models.as_deref())?;
-        if !self.no_wasm_opt {
+        if self.wasm_opt {
             // npm `binaryen` (a current wasm-opt) comes with the test packages.
             if tools::find_on_path("npm").is_some() {
                 tools::ensure_node_packages(root)?;
             }
         }
-        let opt = if self.no_wasm_opt { web::WasmOpt::Off } else { web::WasmOpt::IfAvailable };
-        let sizes = web::build_dist(root, &models, opt)?;
+        let opt = if self.wasm_opt { web::WasmOpt::IfAvailable } else { web::WasmOpt::Off };
+        let build = if self.test_build { web::WasmBuild::Tests } else { web::WasmBuild::Shipped };
+        let sizes = web::build_dist(root, &models, build, opt)?;
         println!("dist/ assembled (models from {}):", models.display());
         web::print_sizes(&sizes);
         Ok(())
@@ -147,13 +154,21 @@ fn main() -> Result<()> {
     }
 }
 
-/// The bench page's pool line: the whole job shared by N workers against one, same run.
+/// The bench page's pool line (the whole job shared by N workers against one, same run) and
+/// its 3D view line (frame time with bodies and with stick figures).
 fn print_pool_line(web: &e2e::BenchResult) {
     if let Some((workers, fps, speedup, share)) = web.pool {
         println!(
             "  whole app job, a pool of {workers} workers: {fps:>8.0} frames/s, {speedup:.2}× one worker \
              (helpers computed {:.0} % of the chunks)",
             share * 100.0
+        );
+    }
+    if let Some((backend, width, height, body, stick)) = &web.render {
+        println!(
+            "  3D view ({backend}, {width}×{height}): {body:.2} ms a frame with bodies, {stick:.2} ms with stick \
+             figures ({:.2}×)",
+            body / stick
         );
     }
 }

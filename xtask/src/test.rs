@@ -279,9 +279,11 @@ struct WebAppRun {
 /// and the bench page against it.
 fn run_web_app(root: &Path, t: &tools::BrowserTestTools, phases: &mut Phases) -> Result<WebAppRun> {
     let models = web::models_dir(root, None)?;
-    // wasm-opt takes minutes on the worker module; the tests run the unoptimised build.
-    let sizes = phases
-        .time("web app: dist/ (both modules, wasm-bindgen)", || web::build_dist(root, &models, web::WasmOpt::Off))?;
+    // The tests' build (profile wasm-release, whose dependencies the wasm tests just
+    // compiled); the shipped LTO build would compile them all again.
+    let sizes = phases.time("web app: dist/ (both modules, wasm-bindgen)", || {
+        web::build_dist(root, &models, web::WasmBuild::Tests, web::WasmOpt::Off)
+    })?;
     let run = e2e::BrowserRun { chromium: t.chromium.clone(), out: root.join("target").join("e2e") };
     let e2e = phases.time("web app: end to end (Playwright)", || e2e::run_suite(root, &run))?;
     let bench = phases.time("web app: bench page", || e2e::run_bench(root, &run, TEST_BENCH_RUNS))?;

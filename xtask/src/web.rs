@@ -1,6 +1,7 @@
-//! The web app's build: both wasm modules (profile `wasm-release`, `+simd128` from
-//! `.cargo/config.toml`), wasm-bindgen `--target web`, wasm-opt when a current one is at hand,
-//! and `dist/` assembled from `web/`, `public/`, the models and the generated `pkg/`.
+//! The web app's build: both wasm modules (`+simd128` from `.cargo/config.toml`) with the
+//! shipped profile `wasm-dist` (LTO, size-optimised, function names stripped) or the tests'
+//! `wasm-release`, wasm-bindgen `--target web`, wasm-opt on request, and `dist/` assembled from
+//! `web/`, `public/`, the models and the generated `pkg/`.
 
 use std::hash::{DefaultHasher, Hash, Hasher};
 use std::io::Write;
@@ -11,9 +12,31 @@ use anyhow::{Context, Result, bail};
 
 use crate::{cmd, tools};
 
-/// The Cargo profile of the browser modules (release without debug info; see Cargo.toml).
-/// The worker's wasm tests build with it too, so they reuse the compiled dependencies.
+/// The Cargo profile of the tests' browser modules (release without debug info; see
+/// Cargo.toml). The worker's wasm tests build with it too, so they reuse the compiled
+/// dependencies.
 pub const WASM_PROFILE: &str = "wasm-release";
+/// The Cargo profile of the shipped browser modules (LTO, dependencies at opt-level `z`).
+pub const WASM_DIST_PROFILE: &str = "wasm-dist";
+
+/// Which build of the modules `dist/` gets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WasmBuild {
+    /// What users download: [`WASM_DIST_PROFILE`], the name section stripped.
+    Shipped,
+    /// What the tests run: [`WASM_PROFILE`] (shares its compiled dependencies with the wasm
+    /// tests; function names kept for stack traces).
+    Tests,
+}
+
+impl WasmBuild {
+    pub fn profile(self) -> &'static str {
+        match self {
+            Self::Shipped => WASM_DIST_PROFILE,
+            Self::Tests => WASM_PROFILE,
+        }
+    }
+}
 pub const WASM_TARGET: &str = "wasm32-unknown-unknown";
 
 /// The browser crates: (package, library name). Each is its own wasm module.
@@ -38,7 +61,8 @@ pub fn models_dir(root: &Path, given: Option<&Path>) -> Result<PathBuf> {
     Ok(dir)
 }
 
-/// Whether to run wasm-opt.
+/// Whether to run wasm-opt (off by default: on the LTO build its output is smaller raw but
+/// larger gzipped, see docs/performance.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum WasmOpt {
     /// When a current wasm-opt is found (npm `binaryen` in tests/node_modules, or on PATH).
@@ -56,25 +80,31 @@ pub struct ModuleSize {
 }
 
 /// Builds both modules and assembles `dist/`. Returns the module sizes.
-pub fn build_dist(root: &Path, models: &Path, wasm_opt: WasmOpt) -> Result<Vec<ModuleSize>> {
+pub fn build_dist(root: &Path, models: &Path, build: WasmBuild, wasm_opt: WasmOpt) -> Result<Vec<ModuleSize>> {
     let wasm_bindgen = tools::ensure_wasm_bindgen(root)?;
     let wasm_opt = match wasm_opt {
         WasmOpt::IfAvailable => find_wasm_opt(root),
         WasmOpt::Off => None,
     };
-    if wasm_opt.is_none() {
-        eprintln!("note: serving wasm without wasm-opt (not requested, or no current wasm-opt found)");
+    if wasm_opt.is_none() && build == WasmBuild::Tests {
+        eprintln!("note: the tests' build of the wasm modules (profile {WASM_PROFILE}), not the shipped one");
     }
     let pkg = root.join("target").join("web").join("pkg");
     std::fs::create_dir_all(&pkg)?;
     let mut sizes = Vec::new();
     for (package, lib) in MODULES {
-        build_module(package)?;
-        let wasm = root.join("target").join(WASM_TARGET).join(WASM_PROFILE).join(format!("{lib}.wasm"));
+        build_module(package, build.profile())?;
+        let wasm = root.join("target").join(WASM_TARGET).join(build.profile()).join(format!("{lib}.wasm"));
         cmd::run(
             Command::new(&wasm_bindgen).arg(&wasm).args(["--target", "web", "--no-typescript", "--out-dir"]).arg(&pkg),
         )?;
         let module = pkg.join(format!("{lib}_bg.wasm"));
+        if build == WasmBuild::Shipped {
+            let bytes = std::fs::read(&module).with_context(|| format!("reading {}", module.display()))?;
+            let stripped = strip_custom_sections(&bytes, STRIPPED_SECTIONS)
+                .with_context(|| format!("stripping {}", module.display()))?;
+            std::fs::write(&module, stripped)?;
+        }
         let optimised = match &wasm_opt {
             Some(tool) => {
                 optimise(root, tool, &module)?;
@@ -107,8 +137,50 @@ pub fn build_dist(root: &Path, models: &Path, wasm_opt: WasmOpt) -> Result<Vec<M
 
 /// `cargo build` of one browser crate (one invocation per crate, so each crate's dependency
 /// features are the same as in its own test build and nothing is rebuilt between them).
-pub fn build_module(package: &str) -> Result<()> {
-    cmd::run(Command::new("cargo").args(["build", "--profile", WASM_PROFILE, "--target", WASM_TARGET, "-p", package]))
+pub fn build_module(package: &str, profile: &str) -> Result<()> {
+    cmd::run(Command::new("cargo").args(["build", "--profile", profile, "--target", WASM_TARGET, "-p", package]))
+}
+
+/// Custom sections the shipped modules drop: function names (a sixth of the worker's bytes;
+/// panics still say file and line) and the toolchain list.
+const STRIPPED_SECTIONS: &[&str] = &["name", "producers"];
+
+/// `module` without the custom sections named in `names` (everything else byte for byte).
+pub fn strip_custom_sections(module: &[u8], names: &[&str]) -> Result<Vec<u8>> {
+    fn leb128(bytes: &[u8], at: &mut usize) -> Result<usize> {
+        let mut value = 0usize;
+        for shift in (0..35).step_by(7) {
+            let byte = *bytes.get(*at).context("a LEB128 number runs past the end")?;
+            *at += 1;
+            value |= usize::from(byte & 0x7f) << shift;
+            if byte & 0x80 == 0 {
+                return Ok(value);
+            }
+        }
+        bail!("a LEB128 number is longer than 5 bytes")
+    }
+    if module.get(..4) != Some(&b"\0asm"[..]) || module.len() < 8 {
+        bail!("not a wasm module (no \\0asm header)");
+    }
+    let mut out = module[..8].to_vec();
+    let mut at = 8;
+    while at < module.len() {
+        let start = at;
+        let id = module[at];
+        at += 1;
+        let size = leb128(module, &mut at)?;
+        let end = at.checked_add(size).filter(|&e| e <= module.len()).context("a section runs past the end")?;
+        let drop = id == 0 && {
+            let mut name_at = at;
+            let len = leb128(module, &mut name_at)?;
+            module.get(name_at..name_at + len).is_some_and(|n| names.iter().any(|w| w.as_bytes() == n))
+        };
+        if !drop {
+            out.extend_from_slice(&module[start..end]);
+        }
+        at = end;
+    }
+    Ok(out)
 }
 
 /// wasm-opt's flags: size-optimised, with the wasm features rustc emits for wasm32 today

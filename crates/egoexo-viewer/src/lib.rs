@@ -5,10 +5,12 @@
 //! already in the world (Y-up, metres).
 //!
 //! # What is drawn
-//! A floor grid at `floor_y`; the reconstructed SMPL skeleton (joints as spheres, bones as
-//! cylinders; left blue, right orange, centre white) — translucent grey on frames that were
-//! not reconstructed (`valid[f] == false`), hidden where a frame holds no pose (all zeros) or a
-//! joint is not finite; the head and wrist device trajectories (a trail of 2 s before / 1 s
+//! A floor (a disc under a grid) at `floor_y`, with soft contact shadows under the wearer's
+//! feet and pelvis; the reconstruction as a body of lit, tapered capsules per SMPL bone sized
+//! from the subject's bone lengths (or, with the body off, the stick figure: joints as spheres,
+//! bones as cylinders); left blue, right orange, centre white — translucent grey on frames
+//! that were not reconstructed (`valid[f] == false`), hidden where a frame holds no pose (all
+//! zeros) or a joint is not finite; the head and wrist device trajectories (a trail of 2 s before / 1 s
 //! after the current frame and a ball at the device; the head's whole path as a faint line);
 //! each tracked observer as a camera frustum (from `camera_poses` and `half_fov`, with a small
 //! "up" marker) and its rays from the camera centre to the ray endpoints, coloured by gate
@@ -25,6 +27,15 @@
 //! viewer.set_scene_json(bytes);      // Uint8Array of serde_json SceneData; throws Error on bad data
 //! viewer.has_ego_only(); viewer.has_ground_truth();
 //! viewer.set_show_ego_only(b); viewer.set_show_ground_truth(b); viewer.set_show_rays(b);
+//! viewer.set_show_body(b);           // bodies of capsules (default) or stick figures
+//! viewer.set_follow(b); viewer.follows();   // the orbit target moves with the wearer
+//! viewer.observer_ids();             // ['observer-1', …]
+//! viewer.set_view_from_observer(i);  // look through observer i's camera; -1: the orbit view
+//! viewer.view_from_observer();
+//! viewer.plot_layout();              // the timeline plots' rows {kind, label, top, height, index}, height, error_max_cm
+//! viewer.plot_image(width);          // Uint8ClampedArray RGBA, width × layout height
+//! viewer.plot_frame_at(x, width); viewer.plot_text(frame);   // click to seek; hover text
+//! viewer.loop_range();               // [start, end] of a looped range, or undefined
 //! viewer.play(); viewer.pause(); viewer.toggle_play(); viewer.is_playing();
 //! viewer.set_speed(x);               // × real time, 0.05..=16, throws outside
 //! viewer.step(n);                    // ±n whole frames, clamped, pauses; returns the frame
@@ -37,6 +48,7 @@
 //! viewer.failure();                  // undefined, or why drawing stopped for good
 //! viewer.free();
 //! const rgba = await Viewer.render_offscreen(sceneJsonBytes, frame, width, height, 'auto');
+//! const mp4 = mux_h264_mp4(avcc, width, height, fps, data, sizes, keys);  // WebCodecs frames → MP4
 //!
 //! const client = new WorkerClient(new Worker('worker.js', { type: 'module' }));
 //! client.warm_up();                            // load the models now
@@ -52,7 +64,8 @@
 //! Left drag orbits, right/middle drag (or Shift/Ctrl/⌘ + left drag) pans, the wheel zooms,
 //! double-click re-frames. Keys (on the window; ignored while typing in form fields, and Space
 //! is left to a focused button): Space play/pause, ←/→ one frame (pauses), Shift+←/→ one
-//! second, Home/End first/last frame. Playback runs on `requestAnimationFrame` inside the
+//! second, Home/End first/last frame. The page adds B (bodies), F (follow), O (next view), R
+//! (re-frame) and ? (help) through the methods above. Playback runs on `requestAnimationFrame` inside the
 //! module and loops at the end.
 //!
 //! # Backends
@@ -72,7 +85,7 @@
 //! place; the page should then use `viewer.canvas()` (or look the canvas up by id again).
 //!
 //! # Native builds
-//! Only the pure parts build natively ([`camera`], [`playback`], [`scene`], [`mesh`],
+//! Only the pure parts build natively ([`camera`], [`playback`], [`scene`], [`plots`], [`video`], [`mesh`],
 //! [`colors`], [`example`]); wgpu, web-sys and the `Viewer` class exist on `wasm32` only.
 
 pub mod camera;

@@ -595,10 +595,8 @@ function drawPlots() {
 
 function movePlayhead(frame) {
   const axis = state.plotAxis;
-  const frames = state.viewer?.frames() ?? 0;
-  if (!axis || frames === 0) return;
-  const x = axis.left + (frames > 1 ? frame / (frames - 1) : 0) * axis.width;
-  $('plot-playhead').style.left = `${x}px`;
+  if (!axis || !state.viewer) return;
+  $('plot-playhead').style.left = `${axis.left + state.viewer.plot_x_of_frame(frame, axis.width)}px`;
 }
 
 function wirePlots() {

@@ -9,6 +9,9 @@ import { mux_h264_mp4 } from './pkg/egoexo_viewer.js';
 const CODECS = ['avc1.42e033', 'avc1.42e01f', 'avc1.4d0033', 'avc1.640033'];
 // Queued frames the encoder may hold before the loop waits for it.
 const MAX_QUEUE = 4;
+// The longest video made in one go (the encoded frames are held in memory until muxed): ten
+// minutes at 30 fps. Longer sessions export a range (a `t=a-b` link plays and exports it).
+export const MAX_VIDEO_FRAMES = 18_000;
 
 function bytesOf(buffer) {
   return ArrayBuffer.isView(buffer)
@@ -22,6 +25,11 @@ export async function exportVideo(viewer, { first, last, onProgress, signal }) {
   if (typeof VideoEncoder === 'undefined') {
     throw new Error('this browser has no WebCodecs VideoEncoder; video export needs Chrome or Edge 94+, '
       + 'Safari 16.4+ or Firefox 130+');
+  }
+  const count = last - first + 1;
+  if (count > MAX_VIDEO_FRAMES) {
+    throw new Error(`${count} frames is more than one video holds (${MAX_VIDEO_FRAMES}, ten minutes at 30 fps): `
+      + 'export a range instead — open a link with t=START-END (seconds) to loop it, then export');
   }
   const canvas = viewer.canvas();
   const width = canvas.width & ~1;
@@ -55,7 +63,6 @@ export async function exportVideo(viewer, { first, last, onProgress, signal }) {
   const wasPlaying = viewer.is_playing();
   viewer.pause();
   try {
-    const count = last - first + 1;
     const keyEvery = Math.max(1, Math.round(2 * fps));
     for (let i = 0; i < count; i += 1) {
       if (signal?.aborted) throw new DOMException('the video export was cancelled', 'AbortError');

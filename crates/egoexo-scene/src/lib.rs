@@ -79,6 +79,19 @@ pub struct ObserverScene {
     pub rays: Vec<f32>,
 }
 
+impl ObserverScene {
+    /// The ray to exo keypoint `keypoint` at `frame`: its world endpoint and gate, or `None`
+    /// where there is none (a zero endpoint with gate 0, or out of range).
+    pub fn ray(&self, frame: usize, keypoint: usize) -> Option<([f32; 3], f32)> {
+        if keypoint >= EXO_KEYPOINT_COUNT {
+            return None;
+        }
+        let at = 4 * (frame.checked_mul(EXO_KEYPOINT_COUNT)? + keypoint);
+        let r = self.rays.get(at..at + 4)?;
+        (r.iter().any(|&v| v != 0.0)).then(|| ([r[0], r[1], r[2]], r[3]))
+    }
+}
+
 impl SceneData {
     /// An empty scene for `frames` frames (no observers, no devices).
     pub fn new(name: &str, fps: f32, frames: usize, method: &str) -> Self {
@@ -199,6 +212,25 @@ mod tests {
         assert_eq!(one.joints[0], (7 * NUM_JOINTS * 3) as f32);
         assert!((one.start_s - 7.0 / 30.0).abs() < 1e-9);
         assert_eq!(scene.frames_slice(8..99).frames, 2);
+    }
+
+    #[test]
+    fn a_ray_is_there_unless_its_slot_is_all_zero() {
+        let mut o = ObserverScene {
+            id: "o".into(),
+            camera_poses: vec![0.0; 14],
+            valid: vec![true; 2],
+            half_fov: [0.5, 0.5],
+            image_size: [640, 480],
+            rays: vec![0.0; 4 * EXO_KEYPOINT_COUNT * 2],
+        };
+        let at = 4 * (EXO_KEYPOINT_COUNT + 3);
+        o.rays[at..at + 4].copy_from_slice(&[1.0, 2.0, 3.0, 0.0]);
+        assert_eq!(o.ray(1, 3), Some(([1.0, 2.0, 3.0], 0.0)), "a ray with gate 0 is still a ray");
+        assert_eq!(o.ray(1, 2), None);
+        assert_eq!(o.ray(2, 0), None);
+        assert_eq!(o.ray(0, EXO_KEYPOINT_COUNT), None);
+        assert_eq!(o.ray(usize::MAX, 0), None);
     }
 
     #[test]

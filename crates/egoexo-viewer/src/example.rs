@@ -78,8 +78,9 @@ pub fn example_scene(frames: usize) -> SceneData {
         rays,
     }];
     // The floor under the soles: the lowest foot joint less its height above the sole.
-    scene.floor_y = all.iter().flat_map(|f| [7, 8, 10, 11].map(|j| f[j].y)).fold(f32::INFINITY, f32::min)
-        - egoexo_core::foot_contact::FOOT_JOINT_ABOVE_SOLE_M;
+    use egoexo_core::foot_contact::{FOOT_JOINT_ABOVE_SOLE_M, FOOT_JOINTS};
+    scene.floor_y =
+        all.iter().flat_map(|f| FOOT_JOINTS.map(|j| f[j].y)).fold(f32::INFINITY, f32::min) - FOOT_JOINT_ABOVE_SOLE_M;
     if !scene.floor_y.is_finite() {
         scene.floor_y = 0.0;
     }

@@ -34,7 +34,7 @@
 //! viewer.view_from_observer();
 //! viewer.plot_layout();              // the timeline plots' rows {kind, label, top, height, index}, height, error_max_cm
 //! viewer.plot_image(width);          // Uint8ClampedArray RGBA, width × layout height
-//! viewer.plot_frame_at(x, width); viewer.plot_text(frame);   // click to seek; hover text
+//! viewer.plot_frame_at(x, width); viewer.plot_x_of_frame(frame, width); viewer.plot_text(frame);
 //! viewer.loop_range();               // [start, end] of a looped range, or undefined
 //! viewer.play(); viewer.pause(); viewer.toggle_play(); viewer.is_playing();
 //! viewer.set_speed(x);               // × real time, 0.05..=16, throws outside

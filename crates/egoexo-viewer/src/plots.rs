@@ -109,6 +109,15 @@ pub fn frame_at(x: f32, width: f32, frames: usize) -> usize {
     ((x / width).clamp(0.0, 1.0) * (frames - 1) as f32).round() as usize
 }
 
+/// Where frame `frame` sits on a plot `width` pixels wide (the inverse of [`frame_at`]): the
+/// playhead's x, pixels from the left edge.
+pub fn x_of_frame(frame: usize, width: f32, frames: usize) -> f32 {
+    if frames < 2 || !(width.is_finite() && width > 0.0) {
+        return 0.0;
+    }
+    frame.min(frames - 1) as f32 / (frames - 1) as f32 * width
+}
+
 /// The mean of `values[range]` that are defined (`>= 0`), or `None`.
 fn mean_defined(values: &[f32], range: std::ops::Range<usize>) -> Option<f32> {
     let (sum, n) = values
@@ -447,6 +456,10 @@ mod tests {
         assert_eq!(frame_at(-5.0, 800.0, 1161), 0);
         assert_eq!(frame_at(f32::NAN, 800.0, 1161), 0);
         assert_eq!(frame_at(3.0, 800.0, 0), 0);
+        for frame in [0, 1, 580, 1160] {
+            assert_eq!(frame_at(x_of_frame(frame, 800.0, 1161), 800.0, 1161), frame);
+        }
+        assert_eq!(x_of_frame(5, 800.0, 1), 0.0);
     }
 
     #[test]

@@ -193,6 +193,24 @@ struct SkeletonStyle {
     dimmed: bool,
 }
 
+impl SkeletonStyle {
+    /// Joint `joint`'s colour (a bone takes its child's: pelvis → left_hip is a left bone).
+    fn joint_colour(&self, joint: usize) -> Rgba {
+        let c = self.colour.unwrap_or_else(|| BodySide::of_joint(joint).colour());
+        if self.dimmed { colors::dimmed(c) } else { c }
+    }
+}
+
+/// The bones of the tree `parents` as `(parent, child)` joint indices (the root has none;
+/// indices outside the 24 joints are skipped).
+fn bones(parents: &[i8]) -> impl Iterator<Item = (usize, usize)> + '_ {
+    parents
+        .iter()
+        .enumerate()
+        .take(NUM_JOINTS)
+        .filter_map(|(child, &parent)| usize::try_from(parent).ok().filter(|&p| p < NUM_JOINTS).map(|p| (p, child)))
+}
+
 /// The joints of frame `frame` in a flat `frames × 24 × 3` array, or `None` when the frame holds
 /// no pose at all (all zeros, as producers write for "nothing here").
 fn frame_joints(joints: &[f32], frame: usize) -> Option<[Vec3; NUM_JOINTS]> {
@@ -256,23 +274,15 @@ pub fn subject_scale(joints: &[f32], frames: usize) -> f32 {
 }
 
 fn skeleton_length(joints: &[Vec3; NUM_JOINTS]) -> f32 {
-    (1..NUM_JOINTS).map(|j| joints[j].distance(joints[PARENTS[j] as usize])).sum()
+    bones(&PARENTS).map(|(parent, child)| joints[child].distance(joints[parent])).sum()
 }
 
 /// A body of tapered capsules per SMPL bone ([`MEAN_SHAPE_BONE_RADII`] × `scale`) and a skull.
 fn push_body(list: &mut FrameDrawList, joints: &[Vec3; NUM_JOINTS], parents: &[i8], scale: f32, style: SkeletonStyle) {
-    let colour = |joint: usize| {
-        let c = style.colour.unwrap_or_else(|| BodySide::of_joint(joint).colour());
-        if style.dimmed { colors::dimmed(c) } else { c }
-    };
-    for (child, &parent) in parents.iter().enumerate().take(NUM_JOINTS) {
-        if let Ok(parent) = usize::try_from(parent)
-            && parent < NUM_JOINTS
-        {
-            let (ra, rb) = MEAN_SHAPE_BONE_RADII[child];
-            // A bone takes its child's side (pelvis → left_hip is a left bone).
-            list.capsule(joints[parent], joints[child], ra * scale, rb * scale, colour(child));
-        }
+    let colour = |joint: usize| style.joint_colour(joint);
+    for (parent, child) in bones(parents) {
+        let (ra, rb) = MEAN_SHAPE_BONE_RADII[child];
+        list.capsule(joints[parent], joints[child], ra * scale, rb * scale, colour(child));
     }
     let head = SmplJoint::Head.index();
     let up = (joints[head] - joints[SmplJoint::Neck.index()]).normalize_or(Vec3::Y);
@@ -302,21 +312,13 @@ fn push_contact_shadows(list: &mut FrameDrawList, joints: &[Vec3; NUM_JOINTS], s
 }
 
 fn push_skeleton(list: &mut FrameDrawList, joints: &[Vec3; NUM_JOINTS], parents: &[i8], style: SkeletonStyle) {
-    let colour = |joint: usize| {
-        let c = style.colour.unwrap_or_else(|| BodySide::of_joint(joint).colour());
-        if style.dimmed { colors::dimmed(c) } else { c }
-    };
+    let colour = |joint: usize| style.joint_colour(joint);
     for (j, &p) in joints.iter().enumerate() {
         let radius = if j == egoexo_core::skeleton::SmplJoint::Head.index() { HEAD_RADIUS } else { JOINT_RADIUS };
         list.sphere(p, radius * style.thickness, colour(j));
     }
-    for (child, &parent) in parents.iter().enumerate().take(NUM_JOINTS) {
-        if let Ok(parent) = usize::try_from(parent)
-            && parent < NUM_JOINTS
-        {
-            // A bone takes its child's side (pelvis → left_hip is a left bone).
-            list.cylinder(joints[parent], joints[child], BONE_RADIUS * style.thickness, colour(child));
-        }
+    for (parent, child) in bones(parents) {
+        list.cylinder(joints[parent], joints[child], BONE_RADIUS * style.thickness, colour(child));
     }
 }
 
@@ -371,13 +373,8 @@ fn push_observer(list: &mut FrameDrawList, o: &ObserverScene, index: usize, fram
         return;
     }
     for k in 0..EXO_KEYPOINT_COUNT {
-        let Some(r) = o.rays.get(4 * (frame * EXO_KEYPOINT_COUNT + k)..4 * (frame * EXO_KEYPOINT_COUNT + k) + 4) else {
-            continue;
-        };
-        let (end, gate) = (Vec3::new(r[0], r[1], r[2]), r[3]);
-        if end == Vec3::ZERO && gate == 0.0 {
-            continue; // no valid ray for this keypoint
-        }
+        let Some((end, gate)) = o.ray(frame, k) else { continue };
+        let end = Vec3::from_array(end);
         let c = colors::gate_colour(gate);
         list.cylinder(centre, end, RAY_RADIUS, c);
         let radius = if ExoKeypoint::ALL[k] == ExoKeypoint::Nose { 0.02 } else { 0.016 };
@@ -453,12 +450,8 @@ pub fn follow_anchor(scene: &SceneData, frame: usize) -> Option<Vec3> {
 /// whatever stands behind it), [`KEYPOINT_MARKER_ANGLE`] across, gate-coloured.
 fn push_keypoint_markers(list: &mut FrameDrawList, o: &ObserverScene, frame: usize, centre: Vec3) {
     for k in 0..EXO_KEYPOINT_COUNT {
-        let at = 4 * (frame * EXO_KEYPOINT_COUNT + k);
-        let Some(r) = o.rays.get(at..at + 4) else { continue };
-        let (end, gate) = (Vec3::new(r[0], r[1], r[2]), r[3]);
-        if end == Vec3::ZERO && gate == 0.0 {
-            continue;
-        }
+        let Some((end, gate)) = o.ray(frame, k) else { continue };
+        let end = Vec3::from_array(end);
         let distance = end.distance(centre);
         if !(distance.is_finite() && distance > KEYPOINT_MARKER_DEPTH) {
             continue;

@@ -136,9 +136,8 @@ pub fn timeline(
                 .map(|labels| (0..frames).map(|f| labels.get(f).map_or(0, |m| m.count_ones() as u8)).collect());
             let gate_mean = (0..frames)
                 .map(|f| {
-                    let rays = &drawn.rays[4 * EXO_KEYPOINT_COUNT * f..4 * EXO_KEYPOINT_COUNT * (f + 1)];
                     let gates: Vec<f32> =
-                        rays.chunks(4).filter(|r| r.iter().any(|&v| v != 0.0)).map(|r| r[3]).collect();
+                        (0..EXO_KEYPOINT_COUNT).filter_map(|k| drawn.ray(f, k)).map(|(_, gate)| gate).collect();
                     if gates.is_empty() { -1.0 } else { gates.iter().sum::<f32>() / gates.len() as f32 }
                 })
                 .collect();

@@ -13,7 +13,7 @@ use glam::Vec3;
 use crate::camera::{OrbitCamera, ViewPoint};
 use crate::error::{ActiveBackend, BackendPreference, ViewerError};
 use crate::playback::Playback;
-use crate::plots::{PlotLayout, describe_frame, frame_at, render_plots};
+use crate::plots::{PlotLayout, describe_frame, frame_at, render_plots, x_of_frame};
 use crate::scene::{
     FrameDrawList, LayerToggles, SceneGeometry, build_frame, follow_anchor, follow_bounds, observer_pose, parse_scene,
     static_lines, view_bounds,
@@ -308,40 +308,32 @@ impl State {
         Some(Vec3::new(anchor.x, 0.0, anchor.z))
     }
 
-    /// Where this frame is drawn from: the observer looked through (when it is tracked now),
-    /// else the orbit camera, moved with the wearer when following.
-    fn view_point(&mut self) -> ViewPoint {
+    /// Where this frame is drawn from, and the layers drawn: through the chosen observer's
+    /// camera while it is tracked (its own frustum and rays hidden), else the orbit camera —
+    /// moved with the wearer when following — which shows that observer's frustum as usual.
+    fn view(&mut self) -> (ViewPoint, LayerToggles) {
         let aspect = self.aspect();
-        if let (Some(index), Some(scene)) = (self.layers.through_observer, &self.scene)
-            && let Some(observer) = scene.observers.get(index)
-            && let Some((rotation, centre)) = observer_pose(observer, self.playback.frame())
-        {
-            return ViewPoint::through_camera(rotation, centre, observer.half_fov[1], aspect);
+        let mut layers = self.layers;
+        if let Some(index) = layers.through_observer {
+            let observer = self.scene.as_ref().and_then(|s| s.observers.get(index));
+            match observer.and_then(|o| observer_pose(o, self.playback.frame()).map(|pose| (o, pose))) {
+                Some((observer, (rotation, centre))) => {
+                    let view_point = ViewPoint::through_camera(rotation, centre, observer.half_fov[1], aspect);
+                    return (view_point, layers);
+                }
+                None => layers.through_observer = None,
+            }
         }
         if self.follow
             && let Some(anchor) = self.anchor()
         {
             self.camera.target = anchor + self.follow_offset;
         }
-        self.camera.view_point(aspect)
-    }
-
-    /// The layers for this frame: looking through an observer that is not tracked now falls
-    /// back to the orbit view, which shows that observer's frustum as usual.
-    fn frame_layers(&self) -> LayerToggles {
-        let mut layers = self.layers;
-        let frame = self.playback.frame();
-        if let Some(index) = layers.through_observer
-            && self.scene.as_ref().and_then(|s| s.observers.get(index)).and_then(|o| observer_pose(o, frame)).is_none()
-        {
-            layers.through_observer = None;
-        }
-        layers
+        (self.camera.view_point(aspect), layers)
     }
 
     fn draw(&mut self) -> Result<(), ViewerError> {
-        let view_point = self.view_point();
-        let layers = self.frame_layers();
+        let (view_point, layers) = self.view();
         let list = match (&self.scene, &self.geometry) {
             (Some(scene), Some(geometry)) => build_frame(scene, geometry, self.playback.frame(), layers),
             _ => FrameDrawList::default(),
@@ -914,6 +906,11 @@ impl Viewer {
     /// The frame under `x` pixels of a plot `width` pixels wide (what a click there seeks to).
     pub fn plot_frame_at(&self, x: f64, width: f64) -> usize {
         self.read(|s| frame_at(x as f32, width as f32, s.playback.frames()))
+    }
+
+    /// Where frame `frame` sits on a plot `width` pixels wide (the playhead's x).
+    pub fn plot_x_of_frame(&self, frame: usize, width: f64) -> f64 {
+        self.read(|s| f64::from(x_of_frame(frame, width as f32, s.playback.frames())))
     }
 
     /// The plots' values at `frame`, one line per row (the hover text).

@@ -8,6 +8,7 @@ pub const LAYERS: &[(&str, &[&str])] = &[
     ("egoexo-core", &[]),
     ("egoexo-protocol", &["egoexo-core"]),
     ("egoexo-test-support", &[]),
+    ("egoexo-video", &[]),
     ("egoexo-motion-io", &["egoexo-core"]),
     ("egoexo-scene", &["egoexo-core"]),
     ("egoexo-infer", &["egoexo-core"]),
@@ -32,7 +33,7 @@ pub const LAYERS: &[(&str, &[&str])] = &[
             "egoexo-share",
         ],
     ),
-    ("egoexo-viewer", &["egoexo-core", "egoexo-scene", "egoexo-protocol"]),
+    ("egoexo-viewer", &["egoexo-core", "egoexo-scene", "egoexo-protocol", "egoexo-video"]),
     (
         "egoexo-cli",
         &[

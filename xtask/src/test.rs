@@ -10,7 +10,7 @@ use crate::cmd::{self, TestCounts};
 use crate::{e2e, tools, web};
 
 /// Crates whose tests also run compiled to wasm32 in headless Chromium.
-const WASM_TEST_CRATES: &[&str] = &["egoexo-core"];
+const WASM_TEST_CRATES: &[&str] = &["egoexo-core", "egoexo-video"];
 
 /// Crates whose tests run compiled to wasm32 in headless Chromium with the web app's profile
 /// ([`web::WASM_PROFILE`]) and the features of the app's own build of that crate, so that the

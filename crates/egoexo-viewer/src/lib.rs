@@ -85,7 +85,7 @@
 //! place; the page should then use `viewer.canvas()` (or look the canvas up by id again).
 //!
 //! # Native builds
-//! Only the pure parts build natively ([`camera`], [`playback`], [`scene`], [`plots`], [`video`], [`mesh`],
+//! Only the pure parts build natively ([`camera`], [`playback`], [`scene`], [`plots`], [`mesh`],
 //! [`colors`], [`example`]); wgpu, web-sys and the `Viewer` class exist on `wasm32` only.
 
 pub mod camera;
@@ -96,7 +96,6 @@ pub mod mesh;
 pub mod playback;
 pub mod plots;
 pub mod scene;
-pub mod video;
 
 #[cfg(target_arch = "wasm32")]
 mod web;

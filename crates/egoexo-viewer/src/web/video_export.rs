@@ -1,9 +1,9 @@
 //! `mux_h264_mp4`: the page's video export hands the frames its `VideoEncoder` produced to
-//! [`crate::video::h264_mp4`] and downloads the MP4 it returns.
+//! [`egoexo_video::h264_mp4`] and downloads the MP4 it returns.
 
 use wasm_bindgen::prelude::*;
 
-use crate::video::{EncodedFrame, h264_mp4};
+use egoexo_video::{EncodedFrame, h264_mp4};
 
 /// Writes an MP4 file: `avcc` is the encoder's `decoderConfig.description` (H.264 in AVC
 /// format), `data` every encoded frame's bytes back to back in decode order, `sizes` each

@@ -1,6 +1,7 @@
-//! The video export's container: frames the page's WebCodecs `VideoEncoder` encoded as H.264
-//! in AVC format (length-prefixed NAL units, the stream's parameter sets in an `avcC`
-//! description) written into an MP4 file (the `mp4` crate) at the session's frame rate.
+//! Writing H.264 into MP4: frames encoded in AVC format (length-prefixed NAL units, the
+//! stream's parameter sets in an `avcC` description) — the page's WebCodecs `VideoEncoder`
+//! (the video export) or a native encoder (the simulator's observer videos) — written into an
+//! MP4 file (the `mp4` crate) at a fixed frame rate.
 //!
 //! Times come from frame indices, not from the encoder's microsecond timestamps, so a
 //! 29.97 fps session stays exact: the track's timescale is `1000 × fps` (rounded) and every
@@ -8,7 +9,7 @@
 
 use std::io::Cursor;
 
-use thiserror::Error;
+use crate::VideoError;
 
 /// One encoded frame, in decode order (WebCodecs' `EncodedVideoChunk`).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -17,25 +18,6 @@ pub struct EncodedFrame {
     pub key: bool,
     /// Length-prefixed NAL units (AVC format).
     pub data: Vec<u8>,
-}
-
-/// Why no video could be written.
-#[derive(Debug, Error)]
-pub enum VideoError {
-    #[error("the encoder's avcC description is not valid: {0}")]
-    BadDescription(String),
-    #[error("there are no frames to write")]
-    NoFrames,
-    #[error("frame 0 is not a key frame: a video must start with one")]
-    NoLeadingKeyFrame,
-    #[error("frame {index} is empty")]
-    EmptyFrame { index: usize },
-    #[error("a video of {width}×{height} px cannot be written: each side must be even and 2..=8192 px")]
-    BadSize { width: u32, height: u32 },
-    #[error("frame rate {0} is not a rate in (0, 1000] frames per second")]
-    BadFrameRate(f64),
-    #[error("writing the MP4 failed: {0}")]
-    Mux(#[from] mp4::Error),
 }
 
 /// The first sequence and picture parameter sets (SPS, PPS) of an `avcC` record

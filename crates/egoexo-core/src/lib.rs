@@ -26,6 +26,7 @@
 
 pub mod aligned;
 pub mod camera;
+pub mod crop;
 pub mod ego_features;
 pub mod euler;
 pub mod exo_keypoints;
@@ -42,6 +43,7 @@ pub mod xr;
 
 pub use aligned::{AlignedSession, Timeline};
 pub use camera::{CameraCalibration, CameraError, Fisheye624, Pinhole, Projection};
+pub use crop::CropWindow;
 pub use ego_features::{EgoFeatureLayout, EgoTrajectories, TrackingMode, WristTrack};
 pub use euler::{Axis, EulerOrder};
 pub use exo_keypoints::{EXO_KEYPOINT_COUNT, ExoKeypoint, Keypoint2d};

@@ -39,6 +39,9 @@ pub enum Method {
     RestPose,
     /// Baseline: per-frame nearest neighbour over training ego features.
     NearestNeighbour,
+    /// EgoNet's coarse pose alone (the paper's first stage; what the region proposal and the
+    /// detector step project into the observers' images).
+    EgoNet,
     /// The fusion network with every observer masked out.
     EgoOnly,
     /// The full method: gated exo rays fused with the ego stream.
@@ -53,6 +56,7 @@ impl Method {
         match self {
             Method::RestPose => "rest-pose",
             Method::NearestNeighbour => "nearest-neighbour",
+            Method::EgoNet => "egonet",
             Method::EgoOnly => "ego-only",
             Method::EgoExo => "ego-exo",
             Method::EgoExoUngated => "ego-exo-ungated",
@@ -61,14 +65,14 @@ impl Method {
 
     /// Whether the method runs the ONNX networks.
     pub fn uses_networks(self) -> bool {
-        matches!(self, Method::EgoOnly | Method::EgoExo | Method::EgoExoUngated)
+        matches!(self, Method::EgoNet | Method::EgoOnly | Method::EgoExo | Method::EgoExoUngated)
     }
 
-    /// How the method treats the observers' rays (`None` for the baselines, which run no
-    /// exo pass).
+    /// How the method treats the observers' rays (`None` for the baselines and EgoNet alone,
+    /// which run no exo pass).
     pub fn exo_mode(self) -> Option<ExoMode> {
         match self {
-            Method::RestPose | Method::NearestNeighbour => None,
+            Method::RestPose | Method::NearestNeighbour | Method::EgoNet => None,
             Method::EgoOnly => Some(ExoMode::Masked),
             Method::EgoExo => Some(ExoMode::Gated),
             Method::EgoExoUngated => Some(ExoMode::Ungated),
@@ -81,7 +85,7 @@ impl Method {
         match self {
             Method::RestPose => CoarsePose::RestPose,
             Method::NearestNeighbour => CoarsePose::NearestNeighbour,
-            Method::EgoOnly | Method::EgoExo | Method::EgoExoUngated => CoarsePose::EgoNet,
+            Method::EgoNet | Method::EgoOnly | Method::EgoExo | Method::EgoExoUngated => CoarsePose::EgoNet,
         }
     }
 }

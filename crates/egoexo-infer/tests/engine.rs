@@ -44,7 +44,14 @@ fn run(engine: &Engine, aligned: &AlignedSession, method: Method) -> egoexo_infe
 fn every_method_hangs_the_body_from_the_tracked_head() {
     let aligned = aligned_session(7.0, 2, TrackingMode::ThreePoint, 1);
     let engine = engine().with_nearest_neighbour(TrackingMode::ThreePoint, nearest_index(TrackingMode::ThreePoint));
-    for method in [Method::RestPose, Method::NearestNeighbour, Method::EgoOnly, Method::EgoExo, Method::EgoExoUngated] {
+    for method in [
+        Method::RestPose,
+        Method::NearestNeighbour,
+        Method::EgoNet,
+        Method::EgoOnly,
+        Method::EgoExo,
+        Method::EgoExoUngated,
+    ] {
         let r = run(&engine, &aligned, method);
         assert_eq!(r.motion.len(), aligned.timeline.frames, "{method}");
         assert_eq!(r.tracking, TrackingMode::ThreePoint);
@@ -57,6 +64,23 @@ fn every_method_hangs_the_body_from_the_tracked_head() {
         }
         assert_eq!(r.gates.len(), 2);
     }
+}
+
+/// EgoNet alone is the coarse pose the other network methods start from: it runs EgoNet once
+/// per window and nothing else, uses no exo evidence, and differs from the fused result.
+#[test]
+fn egonet_alone_is_the_coarse_pose_without_the_fusion() {
+    let aligned = aligned_session(5.0, 2, TrackingMode::ThreePoint, 3);
+    let engine = engine();
+    let before = engine.network_runs();
+    let coarse = run(&engine, &aligned, Method::EgoNet);
+    let runs = engine.network_runs() - before;
+    assert!(runs.egonet > 0 && runs.gate == 0 && runs.fusion == 0 && runs.fusion_ego_only == 0, "{runs:?}");
+    assert!(!coarse.exo_evidence.iter().any(|&e| e));
+    let fused = run(&engine, &aligned, Method::EgoOnly);
+    let moved =
+        coarse.joints.iter().zip(&fused.joints).any(|(a, b)| a.iter().zip(b).any(|(p, q)| p.distance(*q) > 1e-3));
+    assert!(moved, "the fusion refines EgoNet's pose");
 }
 
 #[test]

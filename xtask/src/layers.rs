@@ -17,6 +17,7 @@ pub const LAYERS: &[(&str, &[&str])] = &[
     ("egoexo-server", &["egoexo-core", "egoexo-protocol"]),
     ("egoexo-synth", &["egoexo-core", "egoexo-session"]),
     ("egoexo-share", &["egoexo-core", "egoexo-motion-io", "egoexo-protocol", "egoexo-session"]),
+    ("egoexo-detect", &["egoexo-core", "egoexo-session", "egoexo-infer", "egoexo-video"]),
     (
         "egoexo-dataset",
         &["egoexo-core", "egoexo-motion-io", "egoexo-session", "egoexo-mocap", "egoexo-synth", "egoexo-infer"],

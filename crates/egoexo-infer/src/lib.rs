@@ -27,6 +27,7 @@
 pub mod baselines;
 pub mod cost;
 pub mod decode;
+pub mod detector;
 pub mod engine;
 pub mod inputs;
 pub mod job;
@@ -37,6 +38,7 @@ pub mod plan;
 pub mod timing;
 pub mod windows;
 
+pub use detector::{CropKeypoint, DetectorManifest, KeypointDetector};
 pub use engine::{Engine, Method, ObserverGates, Progress, ReconstructOptions, Reconstruction, Stage};
 pub use job::{ChunkOutputs, ReconstructionJob};
 pub use models::{LoadedModels, NetworkRuns};

@@ -116,6 +116,10 @@ pub struct Manifest {
     /// Frame rate the models were trained at.
     pub fps: f32,
     pub model_sets: Vec<ModelSetManifest>,
+    /// The 2D keypoint detector for observers that bring video instead of keypoints; not one
+    /// of [`Manifest::files`] (loaded only when a session needs it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub detector: Option<crate::detector::DetectorManifest>,
     /// Free-form provenance: training data, subjects, command, commit, date, timings.
     #[serde(default)]
     pub training: serde_json::Value,
@@ -196,6 +200,9 @@ impl Manifest {
                     set.max_observers
                 )));
             }
+        }
+        if let Some(detector) = &self.detector {
+            detector.input_size()?;
         }
         let files: Vec<&ModelFile> = self.model_sets.iter().flat_map(ModelSetManifest::network_files).collect();
         for (i, file) in files.iter().enumerate() {

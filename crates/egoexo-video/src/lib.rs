@@ -16,7 +16,7 @@ pub mod demux;
 pub mod mux;
 
 pub use demux::{H264Track, VideoSample};
-pub use mux::{EncodedFrame, h264_mp4, parameter_sets};
+pub use mux::{EncodedFrame, avcc_record, h264_mp4, parameter_sets};
 
 use thiserror::Error;
 

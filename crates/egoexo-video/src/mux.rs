@@ -51,6 +51,22 @@ pub fn parameter_sets(avcc: &[u8]) -> Result<(Vec<u8>, Vec<u8>), VideoError> {
     }
 }
 
+/// An `AVCDecoderConfigurationRecord` (ISO/IEC 14496-15 § 5.3.3.1) for one SPS and one PPS
+/// (NAL units without start codes), NAL unit lengths of 4 bytes — the inverse of
+/// [`parameter_sets`], for encoders that emit parameter sets in band (Annex B).
+pub fn avcc_record(sps: &[u8], pps: &[u8]) -> Result<Vec<u8>, VideoError> {
+    if sps.len() < 4 || pps.is_empty() || sps.len() > 0xffff || pps.len() > 0xffff {
+        return Err(VideoError::BadDescription(format!("an SPS of {} and a PPS of {} bytes", sps.len(), pps.len())));
+    }
+    let mut v = vec![1, sps[1], sps[2], sps[3], 0xff, 0xe1];
+    v.extend_from_slice(&(sps.len() as u16).to_be_bytes());
+    v.extend_from_slice(sps);
+    v.push(1);
+    v.extend_from_slice(&(pps.len() as u16).to_be_bytes());
+    v.extend_from_slice(pps);
+    Ok(v)
+}
+
 /// Writes `frames` (decode order, starting with a key frame) of an H.264 stream described by
 /// `avcc`, `width × height` pixels, as an MP4 file playing at `fps`.
 pub fn h264_mp4(
@@ -139,6 +155,13 @@ mod tests {
         for bad in [&[][..], &[0, 1, 2, 3, 4, 5, 6][..], &avcc()[..10], &avcc()[..avcc().len() - 1]] {
             assert!(matches!(parameter_sets(bad), Err(VideoError::BadDescription(_))), "{bad:?}");
         }
+    }
+
+    #[test]
+    fn avcc_record_is_the_inverse_of_parameter_sets() {
+        let (sps, pps) = parameter_sets(&avcc()).unwrap();
+        assert_eq!(avcc_record(&sps, &pps).unwrap(), avcc());
+        assert!(avcc_record(&sps[..3], &pps).is_err());
     }
 
     #[test]

@@ -221,38 +221,7 @@ fn frame_joints(joints: &[f32], frame: usize) -> Option<[Vec3; NUM_JOINTS]> {
     Some(std::array::from_fn(|j| Vec3::new(flat[3 * j], flat[3 * j + 1], flat[3 * j + 2])))
 }
 
-/// The body's tapered capsules for the SMPL mean shape ([`MEAN_SHAPE_REST_JOINTS`], 1.70 m):
-/// per bone, indexed by its child joint, the radius at the parent's end and at the child's end,
-/// metres (index 0, the pelvis, has no bone). Scaled per subject by [`subject_scale`].
-pub const MEAN_SHAPE_BONE_RADII: [(f32, f32); NUM_JOINTS] = [
-    (0.0, 0.0),     // pelvis (root)
-    (0.085, 0.075), // pelvis → left hip
-    (0.085, 0.075), // pelvis → right hip
-    (0.105, 0.1),   // pelvis → spine1
-    (0.075, 0.05),  // left thigh
-    (0.075, 0.05),  // right thigh
-    (0.1, 0.105),   // spine1 → spine2
-    (0.05, 0.038),  // left shin
-    (0.05, 0.038),  // right shin
-    (0.105, 0.11),  // spine2 → spine3
-    (0.038, 0.03),  // left foot (its joint is 3 cm above the sole)
-    (0.038, 0.03),  // right foot
-    (0.065, 0.05),  // spine3 → neck
-    (0.07, 0.055),  // spine3 → left collar
-    (0.07, 0.055),  // spine3 → right collar
-    (0.05, 0.05),   // neck → head joint (the skull is a sphere above it)
-    (0.055, 0.05),  // left collar → shoulder
-    (0.055, 0.05),  // right collar → shoulder
-    (0.05, 0.04),   // left upper arm
-    (0.05, 0.04),   // right upper arm
-    (0.04, 0.03),   // left forearm
-    (0.04, 0.03),   // right forearm
-    (0.032, 0.03),  // left hand
-    (0.032, 0.03),  // right hand
-];
-/// The skull of the mean shape: a sphere of this radius, metres, centred this far beyond the
-/// head joint along the neck → head direction.
-pub const MEAN_SHAPE_SKULL: (f32, f32) = (0.1, 0.085);
+pub use egoexo_core::skeleton::{MEAN_SHAPE_BONE_RADII, MEAN_SHAPE_SKULL};
 
 /// The subject's size relative to the SMPL mean shape: the summed length of its 23 bones over
 /// the mean shape's, the median over up to 64 frames spread over the session that hold a

@@ -1,0 +1,221 @@
+//! The detector step (paper § Ego-Guided Wearer Localization): for an observer that brings
+//! RGB video instead of keypoints, each video frame is cropped to the region the wearer's
+//! coarse pose (EgoNet's, [`egoexo_infer::Method::EgoNet`]) projects to, a top-down 2D pose
+//! model ([`egoexo_infer::KeypointDetector`]) finds the 17 COCO keypoints in the crop, and
+//! they are mapped back to full-image pixels ([`egoexo_core::crop::CropWindow`]) and kept as
+//! the observer's [`KeypointTrack`] — timestamps on the session clock, the detector's
+//! confidence as the score the gate reads. A frame without a region gets no detection (the
+//! keypoints' usual validity path).
+//!
+//! The work is split so that decoding can be anyone's: [`plan_observer`] says, per video
+//! frame in presentation order, which sample it is, when it was shown and which window to
+//! crop; the caller decodes (WebCodecs in the browser's worker; OpenH264 natively,
+//! [`native`] with the `openh264` feature), crops ([`egoexo_core::crop::resample_rgb`] or the
+//! browser's `drawImage`), runs the detector and hands each result to
+//! [`ObserverDetections::record`].
+//!
+//! Conventions: pixels with the centre of the top-left pixel at (0, 0); session-clock
+//! nanoseconds.
+
+#[cfg(feature = "openh264")]
+pub mod native;
+
+use egoexo_core::aligned::AlignedSession;
+use egoexo_core::crop::CropWindow;
+use egoexo_core::exo_keypoints::{COCO17_COUNT, Keypoint2d};
+use egoexo_core::region::{DEFAULT_REGION_MARGIN, propose_region};
+use egoexo_core::skeleton::NUM_JOINTS;
+use egoexo_infer::{CropKeypoint, Reconstruction};
+use egoexo_session::model::{KeypointTrack, Session};
+use egoexo_video::{H264Track, VideoError};
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// The smallest crop side, pixels: a wearer far away is not blown up past this (the model
+/// would see a few pixels stretched over its whole input).
+pub const MIN_CROP_SIDE_PX: f32 = 48.0;
+
+/// Why an observer's video could not be used.
+#[derive(Debug, Error)]
+pub enum DetectError {
+    #[error("observer `{observer}`'s video `{path}`: {source}")]
+    Video {
+        observer: String,
+        path: String,
+        #[source]
+        source: VideoError,
+    },
+    #[error(
+        "observer `{observer}`'s video `{path}` is {video_w}×{video_h} px, its camera calibration {camera_w}×{camera_h} px; expected the same size (export the RGB stream at the calibration's resolution)"
+    )]
+    SizeMismatch { observer: String, path: String, video_w: u32, video_h: u32, camera_w: u32, camera_h: u32 },
+    #[error("observer {0} does not exist in the session")]
+    NoSuchObserver(usize),
+    #[error("observer `{0}` has no video")]
+    NoVideo(String),
+    #[error("the coarse pose covers {coarse} frames, the aligned session {aligned}")]
+    CoarseMismatch { coarse: usize, aligned: usize },
+    #[error("detection {index} recorded for an observer video of {frames} frames")]
+    NoSuchFrame { index: usize, frames: usize },
+}
+
+/// One video frame to detect on.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PlannedFrame {
+    /// The frame's sample in the track (decode order).
+    pub sample: usize,
+    /// When it was shown, session-clock nanoseconds.
+    pub time_ns: i64,
+    /// The aligned frame whose coarse pose and observer pose made the window.
+    pub aligned_frame: Option<usize>,
+    /// Where to crop; `None`: the wearer has no region in this frame (not tracked, outside
+    /// the session's timeline, or not in view) — no detection.
+    pub window: Option<CropWindow>,
+}
+
+/// One observer's video and where to look in each of its frames.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ObserverVideoPlan {
+    /// Index of the observer in the session (and the aligned session).
+    pub observer: usize,
+    pub observer_id: String,
+    pub video_path: String,
+    pub track: H264Track,
+    /// Every frame, in presentation order (the order decoders output them).
+    pub frames: Vec<PlannedFrame>,
+}
+
+impl ObserverVideoPlan {
+    /// Frames that get a detection.
+    pub fn frames_with_region(&self) -> usize {
+        self.frames.iter().filter(|f| f.window.is_some()).count()
+    }
+}
+
+/// Observers that have a video and no keypoints: the ones the detector step is for.
+pub fn observers_needing_detection(session: &Session) -> Vec<usize> {
+    session
+        .observers
+        .iter()
+        .enumerate()
+        .filter(|(_, o)| o.video.is_some() && o.keypoints.is_none())
+        .map(|(i, _)| i)
+        .collect()
+}
+
+/// Plans the detector step for observer `observer` of `session`, whose video file's bytes are
+/// `mp4`: each frame's session time (the video's `start_ns` plus its presentation time) and
+/// the crop window around the region that `coarse` (EgoNet's pose on `aligned`'s timeline)
+/// projects to at the aligned frame nearest that time, seen from the observer's pose there.
+pub fn plan_observer(
+    session: &Session,
+    aligned: &AlignedSession,
+    coarse: &Reconstruction,
+    observer: usize,
+    mp4: &[u8],
+) -> Result<ObserverVideoPlan, DetectError> {
+    let o = session.observers.get(observer).ok_or(DetectError::NoSuchObserver(observer))?;
+    let video = o.video.as_ref().ok_or_else(|| DetectError::NoVideo(o.id.clone()))?;
+    let track = H264Track::read(mp4).map_err(|source| DetectError::Video {
+        observer: o.id.clone(),
+        path: video.path.clone(),
+        source,
+    })?;
+    if track.width != o.camera.width || track.height != o.camera.height {
+        return Err(DetectError::SizeMismatch {
+            observer: o.id.clone(),
+            path: video.path.clone(),
+            video_w: track.width,
+            video_h: track.height,
+            camera_w: o.camera.width,
+            camera_h: o.camera.height,
+        });
+    }
+    if coarse.joints.len() != aligned.timeline.frames {
+        return Err(DetectError::CoarseMismatch { coarse: coarse.joints.len(), aligned: aligned.timeline.frames });
+    }
+    let aligned_observer = aligned.observers.get(observer).ok_or(DetectError::NoSuchObserver(observer))?;
+    let timeline = &aligned.timeline;
+    let frame_ns = 1e9 / f64::from(timeline.fps);
+    let frames = track
+        .presentation_order()
+        .into_iter()
+        .map(|sample| {
+            let time_ns = video.start_ns.saturating_add(track.presentation_ns(sample));
+            let position = (time_ns - timeline.start_ns) as f64 / frame_ns;
+            let nearest = position.round();
+            let aligned_frame = (nearest >= 0.0 && (nearest as usize) < timeline.frames).then_some(nearest as usize);
+            let window = aligned_frame.and_then(|f| {
+                let tracked = coarse.valid.get(f).copied().unwrap_or(false)
+                    && aligned_observer.head.valid.get(f).copied().unwrap_or(false);
+                if !tracked {
+                    return None;
+                }
+                let region = propose_region(
+                    &coarse.joints[f][..NUM_JOINTS],
+                    &aligned_observer.camera,
+                    &aligned_observer.head.poses[f],
+                    DEFAULT_REGION_MARGIN,
+                );
+                region.bbox().and_then(|b| CropWindow::around(&b, MIN_CROP_SIDE_PX))
+            });
+            PlannedFrame { sample, time_ns, aligned_frame, window }
+        })
+        .collect();
+    Ok(ObserverVideoPlan { observer, observer_id: o.id.clone(), video_path: video.path.clone(), track, frames })
+}
+
+/// The detections of one observer's video as they come in, frame by frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ObserverDetections {
+    windows: Vec<Option<CropWindow>>,
+    track: KeypointTrack,
+    detected: usize,
+}
+
+impl ObserverDetections {
+    /// Empty detections for every frame of `plan` (frames never recorded stay undetected).
+    pub fn new(plan: &ObserverVideoPlan) -> Self {
+        Self {
+            windows: plan.frames.iter().map(|f| f.window).collect(),
+            track: KeypointTrack {
+                timestamps_ns: plan.frames.iter().map(|f| f.time_ns).collect(),
+                frames: vec![[None; COCO17_COUNT]; plan.frames.len()],
+            },
+            detected: 0,
+        }
+    }
+
+    /// Records the detector's output for planned frame `index` (presentation order), mapping
+    /// its crop coordinates through the frame's window to full-image pixels. A frame without a
+    /// window keeps no keypoints whatever is recorded.
+    pub fn record(&mut self, index: usize, keypoints: &[CropKeypoint; COCO17_COUNT]) -> Result<(), DetectError> {
+        let frames = self.windows.len();
+        let window = self.windows.get(index).ok_or(DetectError::NoSuchFrame { index, frames })?;
+        let Some(window) = window else { return Ok(()) };
+        self.track.frames[index] = keypoints.map(|k| {
+            let pixel = window.full_from_normalized(k.at);
+            (pixel.is_finite() && k.score.is_finite()).then_some(Keypoint2d { pixel, score: k.score })
+        });
+        self.detected += 1;
+        Ok(())
+    }
+
+    /// Frames with a detection so far.
+    pub fn detected_frames(&self) -> usize {
+        self.detected
+    }
+
+    /// The keypoint track (every planned frame, in presentation order).
+    pub fn into_track(self) -> KeypointTrack {
+        self.track
+    }
+}
+
+/// Frames per second of detection measured so far, and what is left: for progress reports.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct DetectionProgress {
+    pub observer: usize,
+    pub done: usize,
+    pub total: usize,
+}

@@ -32,7 +32,11 @@ enum Command {
     /// Score reconstruction methods on simulated sessions of `--subjects` with the paper's metrics
     /// (the nearest-neighbour baseline looks up poses among the library's other subjects).
     Eval(commands::eval::Args),
-    /// Reconstruct the wearer's motion and write it as AMASS npz, BVH, glb, CSV or JSON.
+    /// Detect the wearer's 2D keypoints in the observers' videos (inside EgoNet's regions) and
+    /// write the session with them.
+    Keypoints(commands::keypoints::Args),
+    /// Reconstruct the wearer's motion and write it as AMASS npz, BVH, glb, CSV or JSON
+    /// (observers with video and no keypoints get the detector step first).
     Reconstruct(commands::reconstruct::Args),
     /// Serve the page and the share API (share links), storing shares on disk or in S3.
     Serve(commands::serve::Args),
@@ -51,6 +55,7 @@ fn main() -> std::process::ExitCode {
         Command::Synth(args) => commands::synth::run(args),
         Command::Walk(args) => commands::walk::run(args),
         Command::Eval(args) => commands::eval::run(args),
+        Command::Keypoints(args) => commands::keypoints::run(args),
         Command::Reconstruct(args) => commands::reconstruct::run(args),
         Command::Serve(args) => commands::serve::run(args),
         Command::Share(args) => commands::share::run(args),

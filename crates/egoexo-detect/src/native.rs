@@ -84,8 +84,8 @@ pub fn decode_frames(
 
 /// Encodes RGB frames (`width × height × 3` bytes each, even sides) with OpenH264 into an MP4
 /// playing at `fps` at about `bitrate_bps`, a key frame every 30 frames.
-pub fn encode_mp4<'a>(
-    frames: impl IntoIterator<Item = &'a [u8]>,
+pub fn encode_mp4(
+    frames: impl IntoIterator<Item = impl AsRef<[u8]>>,
     width: u32,
     height: u32,
     fps: f64,
@@ -102,6 +102,7 @@ pub fn encode_mp4<'a>(
     let (mut sps, mut pps) = (None::<Vec<u8>>, None::<Vec<u8>>);
     let mut encoded = Vec::new();
     for (index, rgb) in frames.into_iter().enumerate() {
+        let rgb = rgb.as_ref();
         if rgb.len() != width as usize * height as usize * 3 {
             return Err(CodecError::BadRgb { index, got: rgb.len(), width, height });
         }

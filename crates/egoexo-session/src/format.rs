@@ -166,11 +166,43 @@ pub fn write_egoexo_zip(session: &Session) -> Result<Vec<u8>, WriteError> {
 #[cfg(not(target_arch = "wasm32"))]
 /// Writes the session to `path`: a zip file, or (with `as_folder`) a folder (native only).
 pub fn save_egoexo(session: &Session, path: &std::path::Path, as_folder: bool) -> Result<(), WriteError> {
+    save_egoexo_with(session, BTreeMap::new(), path, as_folder)
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+/// [`save_egoexo`] with files the session refers to but does not hold — its observers'
+/// videos (`Observer::video`'s paths) — written next to the session's own (native only).
+/// Every video the session names must be among them.
+pub fn save_egoexo_with(
+    session: &Session,
+    extra: BTreeMap<String, Vec<u8>>,
+    path: &std::path::Path,
+    as_folder: bool,
+) -> Result<(), WriteError> {
     let io = |source| WriteError::Io { path: path.display().to_string(), source };
+    let mut files = write_egoexo_files(session)?;
+    for (name, bytes) in extra {
+        if files.contains_key(&name) {
+            return Err(WriteError::Encode { what: name, message: "is one of the session's own files".into() });
+        }
+        files.insert(name, bytes);
+    }
+    for observer in &session.observers {
+        if let Some(video) = &observer.video
+            && !files.contains_key(&video.path)
+        {
+            return Err(WriteError::Encode {
+                what: format!("observer `{}`", observer.id),
+                message: format!("its video `{}` was not given to write", video.path),
+            });
+        }
+    }
     if as_folder {
-        crate::vfs::write_dir(path, &write_egoexo_files(session)?).map_err(io)
+        crate::vfs::write_dir(path, &files).map_err(io)
     } else {
-        std::fs::write(path, write_egoexo_zip(session)?).map_err(io)
+        let zip = egoexo_motion_io::npz::write_zip(&files)
+            .map_err(|e| WriteError::Encode { what: "the .egoexo zip".into(), message: e.to_string() })?;
+        std::fs::write(path, zip).map_err(io)
     }
 }
 

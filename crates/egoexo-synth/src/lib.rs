@@ -14,6 +14,7 @@
 //! - [`cameras`] — Aria RGB (Fisheye624) and pinhole presets.
 //! - [`simulate`] — a full `Session` with ground truth and occlusion labels.
 //! - [`procedural`] — a procedural walking motion for tests and examples.
+//! - [`video`] — observer video frames of the wearer's body, for the detector step's tests.
 
 pub mod cameras;
 pub mod config;
@@ -24,6 +25,7 @@ pub mod procedural;
 pub mod rng;
 pub mod scene;
 pub mod simulate;
+pub mod video;
 
 pub use config::SynthConfig;
 pub use simulate::{ObserverReport, SimulatedSession, SynthError, simulate};

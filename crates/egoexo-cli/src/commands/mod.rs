@@ -1,8 +1,10 @@
 //! One module per subcommand.
 
 pub mod convert;
+pub mod detection;
 pub mod eval;
 pub mod inspect;
+pub mod keypoints;
 pub mod live;
 pub mod mocap;
 pub mod models;

@@ -13,6 +13,7 @@ use egoexo_motion_io::{Format, write};
 use egoexo_session::align::{AlignOptions, align};
 use indicatif::{ProgressBar, ProgressStyle};
 
+use super::detection::{detect_missing_keypoints, print_reports};
 use super::models::{load_model_set, models_dir, read_manifest};
 use super::session_input::SessionInput;
 use super::tracking::TrackingArg;
@@ -138,7 +139,13 @@ fn import_and_align(
     clock: &mut dyn egoexo_infer::Clock,
 ) -> Result<(egoexo_session::import::Imported, egoexo_core::aligned::AlignedSession, StageTimings)> {
     let mut timer = StageTimer::new(clock);
-    let imported = timer.time(TimedStage::Import, || args.input.import())?;
+    let mut imported = timer.time(TimedStage::Import, || args.input.import())?;
+    if !args.ego_only {
+        let models = models_dir(args.models.as_deref());
+        let tracking = args.tracking.map(TrackingMode::from);
+        let reports = detect_missing_keypoints(&args.input.session, &mut imported, &models, tracking, &[])?;
+        print_reports(&reports);
+    }
     let options = AlignOptions { fps: args.fps, ..AlignOptions::default() };
     let aligned = timer.time(TimedStage::Align, || align(&imported.session, &options))?;
     Ok((imported, aligned, timer.timings))

@@ -49,6 +49,10 @@ pub enum DetectError {
         "observer `{observer}`'s video `{path}` is {video_w}×{video_h} px, its camera calibration {camera_w}×{camera_h} px; expected the same size (export the RGB stream at the calibration's resolution)"
     )]
     SizeMismatch { observer: String, path: String, video_w: u32, video_h: u32, camera_w: u32, camera_h: u32 },
+    #[error(
+        "observer `{observer}`'s video `{path}` has {frames} frames but {times} frame times; expected one time per frame"
+    )]
+    FrameTimes { observer: String, path: String, times: usize, frames: usize },
     #[error("observer {0} does not exist in the session")]
     NoSuchObserver(usize),
     #[error("observer `{0}` has no video")]
@@ -104,7 +108,8 @@ pub fn observers_needing_detection(session: &Session) -> Vec<usize> {
 }
 
 /// Plans the detector step for observer `observer` of `session`, whose video file's bytes are
-/// `mp4`: each frame's session time (the video's `start_ns` plus its presentation time) and
+/// `mp4`: each frame's session time (the recording's frame times, else the video's `start_ns`
+/// plus the frame's presentation time) and
 /// the crop window around the region that `coarse` (EgoNet's pose on `aligned`'s timeline)
 /// projects to at the aligned frame nearest that time, seen from the observer's pose there.
 pub fn plan_observer(
@@ -131,6 +136,14 @@ pub fn plan_observer(
             camera_h: o.camera.height,
         });
     }
+    if !video.frame_times_ns.is_empty() && video.frame_times_ns.len() != track.samples.len() {
+        return Err(DetectError::FrameTimes {
+            observer: o.id.clone(),
+            path: video.path.clone(),
+            times: video.frame_times_ns.len(),
+            frames: track.samples.len(),
+        });
+    }
     if coarse.joints.len() != aligned.timeline.frames {
         return Err(DetectError::CoarseMismatch { coarse: coarse.joints.len(), aligned: aligned.timeline.frames });
     }
@@ -140,8 +153,12 @@ pub fn plan_observer(
     let frames = track
         .presentation_order()
         .into_iter()
-        .map(|sample| {
-            let time_ns = video.start_ns.saturating_add(track.presentation_ns(sample));
+        .enumerate()
+        .map(|(shown, sample)| {
+            let time_ns = match video.frame_times_ns.get(shown) {
+                Some(&t) => t,
+                None => video.start_ns.saturating_add(track.presentation_ns(sample)),
+            };
             let position = (time_ns - timeline.start_ns) as f64 / frame_ns;
             let nearest = position.round();
             let aligned_frame = (nearest >= 0.0 && (nearest as usize) < timeline.frames).then_some(nearest as usize);

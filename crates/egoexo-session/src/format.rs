@@ -114,6 +114,11 @@ pub fn write_egoexo_files(session: &Session) -> Result<BTreeMap<String, Vec<u8>>
         }
         if let Some(video) = &observer.video {
             entry["video"] = json!({"path": video.path, "start_ns": video.start_ns});
+            if !video.frame_times_ns.is_empty() {
+                let path = format!("{dir}/video_timestamps.csv");
+                files.insert(path.clone(), crate::video::write_frame_timestamps(&video.frame_times_ns).into_bytes());
+                entry["video"]["timestamps"] = json!(path);
+            }
         }
         if let Some(features) = &observer.context_features {
             let path = format!("{dir}/context_features.npz");
@@ -582,7 +587,18 @@ impl ManifestReader<'_> {
                     });
                 }
                 let start_ns = ctx.i64(ctx.field(video, &vpath, "start_ns")?, &join(&vpath, "start_ns"))?;
-                Some(VideoRef { path: normalized, start_ns })
+                let frame_times_ns = match ctx.optional(video, &vpath, "timestamps")? {
+                    Some(t) => {
+                        let file = self.data_path(t, &join(&vpath, "timestamps"))?;
+                        crate::video::read_frame_timestamps(
+                            &self.root.display_path(&file),
+                            &self.root.read(&file)?,
+                            crate::video::SESSION_TIMESTAMP_COLUMN,
+                        )?
+                    }
+                    None => Vec::new(),
+                };
+                Some(VideoRef { path: normalized, start_ns, frame_times_ns })
             }
             None => None,
         };

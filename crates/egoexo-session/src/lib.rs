@@ -34,6 +34,7 @@ pub mod model;
 pub mod npz;
 pub mod validate;
 pub mod vfs;
+pub mod video;
 
 pub use align::{AlignError, AlignOptions, align};
 pub use error::{ImportError, ImportErrorKind, ImportWarning, Location};

@@ -176,6 +176,11 @@ pub struct VideoRef {
     pub path: String,
     /// Session-clock timestamp of the video's first frame, nanoseconds.
     pub start_ns: i64,
+    /// Session-clock time of every frame in presentation order, nanoseconds, when the
+    /// recording gave them (Aria exports: each frame's capture time); empty: the first frame at
+    /// `start_ns` and the rest at the MP4's own presentation times after it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub frame_times_ns: Vec<i64>,
 }
 
 /// Per-frame context feature vectors, row-major `len × dim`.

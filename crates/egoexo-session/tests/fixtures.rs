@@ -288,3 +288,52 @@ fn utc_clock_reads_utc_timestamps() {
     // COCO frames are timed from the observer trajectory, so they follow the chosen clock.
     assert_eq!(s.observers[1].keypoints.as_ref().unwrap().timestamps_ns[0], START_NS + UTC_OFFSET_NS);
 }
+
+/// An observer folder's MP4 and its capture times: found next to the MPS files, timed on the
+/// session clock, kept through `.egoexo`; a missing timestamps file or two videos are errors
+/// naming the folder, and the UTC clock leaves the video out with a warning.
+#[test]
+fn an_observer_folder_video_is_found_and_timed() {
+    let mut files = aria_fixture();
+    let times: Vec<i64> = (0..5).map(|i| START_NS + 1_000_000 + i * 33_333_333).collect();
+    let csv =
+        std::iter::once("capture_timestamp_ns".to_owned()).chain(times.iter().map(i64::to_string)).collect::<Vec<_>>();
+    files.insert("observers/observer-1/video/rgb.mp4".into(), b"an mp4 the import does not open".to_vec());
+    files.insert("observers/observer-1/video/rgb.timestamps.csv".into(), (csv.join("\n") + "\n").into_bytes());
+    let imported = import_session(&tree("aria", files.clone()), &ImportOptions::default()).unwrap();
+    let video = imported.session.observers[0].video.clone().expect("observer-1 has its video");
+    assert_eq!(video.path, "observers/observer-1/video/rgb.mp4");
+    assert_eq!((video.start_ns, &video.frame_times_ns), (times[0], &times));
+    assert!(imported.session.observers[1].video.is_none());
+
+    // Through .egoexo: the frame times come back.
+    let mut egoexo = write_egoexo_files(&imported.session).unwrap();
+    egoexo.insert(video.path.clone(), files["observers/observer-1/video/rgb.mp4"].clone());
+    let (back, warnings) = read_egoexo(&tree("s.egoexo", egoexo)).unwrap();
+    assert!(warnings.is_empty(), "{warnings:?}");
+    assert_eq!(back.observers[0].video.as_ref(), Some(&video));
+
+    let mut missing = files.clone();
+    missing.remove("observers/observer-1/video/rgb.timestamps.csv");
+    let err = import_session(&tree("aria", missing), &ImportOptions::default()).unwrap_err();
+    assert!(err.to_string().starts_with("observers/observer-1/video/rgb.timestamps.csv: file not found"), "{err}");
+    assert!(err.to_string().contains("capture_timestamp_ns"), "{err}");
+    let mut two = files.clone();
+    two.insert("observers/observer-1/other.mp4".into(), vec![0]);
+    let err = import_session(&tree("aria", two), &ImportOptions::default()).unwrap_err();
+    assert!(err.to_string().contains("at most one MP4 video per observer folder"), "{err}");
+    let mut bad = files.clone();
+    bad.insert("observers/observer-1/video/rgb.timestamps.csv".into(), b"capture_timestamp_ns\n5\n4\n".to_vec());
+    let err = import_session(&tree("aria", bad), &ImportOptions::default()).unwrap_err();
+    assert!(err.to_string().contains("rgb.timestamps.csv, line 3, field `capture_timestamp_ns`"), "{err}");
+
+    let utc = ImportOptions { clock: egoexo_session::aria::trajectory::Clock::Utc, ..ImportOptions::default() };
+    files.remove("observers/observer-1/keypoints.jsonl");
+    let imported = import_session(&tree("aria", files), &utc).unwrap();
+    assert!(imported.session.observers[0].video.is_none());
+    assert!(
+        imported.warnings.iter().any(|w| w.file.ends_with("rgb.mp4") && w.message.contains("UTC")),
+        "{:?}",
+        imported.warnings
+    );
+}

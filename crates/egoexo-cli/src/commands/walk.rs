@@ -99,7 +99,7 @@ pub fn observer_videos(
         let mp4 = egoexo_detect::native::encode_mp4(frames, w, h, f64::from(motion.fps), 6_000_000)?;
         let path = format!("observers/{}/rgb.mp4", observer.id);
         observer.keypoints = None;
-        observer.video = Some(VideoRef { path: path.clone(), start_ns: motion.start_ns });
+        observer.video = Some(VideoRef { path: path.clone(), start_ns: motion.start_ns, frame_times_ns: Vec::new() });
         files.insert(path, mp4);
     }
     Ok(files)

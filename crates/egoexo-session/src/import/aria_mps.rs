@@ -48,7 +48,7 @@ use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
 use crate::floor::{Floor, floor_from_points};
 use crate::json::JsonCtx;
 use crate::keypoints::read_keypoints;
-use crate::model::{Observer, Session, SubjectInfo, Trajectory, Wearer, WristSource};
+use crate::model::{Observer, Session, SubjectInfo, Trajectory, VideoRef, Wearer, WristSource};
 use crate::vfs::FileTree;
 
 /// File name of an MPS closed-loop trajectory.
@@ -138,6 +138,9 @@ pub(crate) struct LoadedDevice {
     pub hand_wrists: Option<([Option<Trajectory>; 2], WristSource)>,
     /// The floor from semidense points (head devices with points that show one).
     pub floor: Option<Floor>,
+    /// The RGB stream as MP4 with its frames' times on the session clock (observers that
+    /// bring one, [`crate::video::find_device_video`]).
+    pub video: Option<VideoRef>,
 }
 
 /// Reads and converts one device folder.
@@ -302,7 +305,38 @@ pub(crate) fn load_device(
         }
         _ => None,
     };
-    Ok(LoadedDevice { trajectory, camera, synced, hand_wrists, floor })
+    let video = match role {
+        DeviceRole::Observer => device_video(dir, clock, sync.as_ref(), warnings)?,
+        _ => None,
+    };
+    Ok(LoadedDevice { trajectory, camera, synced, hand_wrists, floor, video })
+}
+
+/// An observer folder's MP4 and its frames' capture times on the session clock (mapped by the
+/// device's `time_sync.csv` like its trajectory); `None` without a video, or on the UTC clock
+/// (capture times are device-clock times; a warning says the video was left out).
+fn device_video(
+    dir: &FileTree,
+    clock: Clock,
+    sync: Option<&(TimeSync, String)>,
+    warnings: &mut Vec<ImportWarning>,
+) -> Result<Option<VideoRef>, ImportError> {
+    let Some((video, timestamps)) = crate::video::find_device_video(dir)? else { return Ok(None) };
+    if clock == Clock::Utc {
+        warnings.push(ImportWarning {
+            file: dir.display_path(&video),
+            message: "left out: its frames are timed on the device clock, but the UTC clock was chosen".into(),
+        });
+        return Ok(None);
+    }
+    let file = dir.display_path(&timestamps);
+    let mut times =
+        crate::video::read_frame_timestamps(&file, &dir.read(&timestamps)?, crate::video::CAPTURE_TIMESTAMP_COLUMN)?;
+    if let Some((sync, sync_file)) = sync {
+        map_clock(&mut times, sync, sync_file, &file)?;
+    }
+    // The path inside the device folder; `DeviceLoader::observer` makes it the session root's.
+    Ok(Some(VideoRef { path: video, start_ns: times[0], frame_times_ns: times }))
 }
 
 /// Maps `timestamps` (of `what`) onto the common clock of `sync`; they must stay strictly
@@ -505,7 +539,13 @@ impl<'w> DeviceLoader<'w> {
             head: device.trajectory,
             camera,
             keypoints,
-            video: None,
+            video: device.video.map(|mut video| {
+                let dir = dir.trim_end_matches('/');
+                if !dir.is_empty() {
+                    video.path = format!("{dir}/{}", video.path);
+                }
+                video
+            }),
             context_features: None,
         })
     }

@@ -49,6 +49,8 @@ pub const LAYERS: &[(&str, &[&str])] = &[
             "egoexo-share",
             "egoexo-server",
             "egoexo-web-worker",
+            "egoexo-detect",
+            "egoexo-video",
         ],
     ),
 ];

@@ -228,3 +228,38 @@ pub fn render_frame(
     }
     rgb
 }
+
+/// Renders every observer's video of `sim` — the wearer's `motion` (its ground truth) seen
+/// from the observer's true head poses, one frame per motion frame — and hands each to
+/// `encode(frames, width, height, fps)`, which returns the video file's bytes (natively,
+/// `egoexo_detect::native::encode_mp4`). The observers' simulated keypoints are replaced by the
+/// video (`observers/<id>/rgb.mp4`, first frame at the motion's start); returns the files by
+/// their session paths.
+pub fn render_observer_videos<E>(
+    sim: &mut crate::SimulatedSession,
+    motion: &egoexo_core::SmplMotion,
+    look: &Appearance,
+    mut encode: impl FnMut(&mut dyn Iterator<Item = Vec<u8>>, u32, u32, f64) -> Result<Vec<u8>, E>,
+) -> Result<std::collections::BTreeMap<String, Vec<u8>>, E> {
+    let scale = motion.skeleton.head_height() / egoexo_core::SmplSkeleton::mean_shape().head_height();
+    let floor_y = sim.session.floor.as_ref().map_or(0.0, |f| f.height_m);
+    let mut files = std::collections::BTreeMap::new();
+    for (o, observer) in sim.session.observers.iter_mut().enumerate() {
+        let rays = CameraRays::new(&observer.camera);
+        let heads = &sim.true_observer_heads[o];
+        let mut frames = motion.poses.iter().zip(heads).map(|(pose, head)| {
+            render_frame(&motion.skeleton.forward_kinematics(pose), scale, &rays, head, floor_y, look)
+        });
+        let (w, h) = (observer.camera.width, observer.camera.height);
+        let bytes = encode(&mut frames, w, h, f64::from(motion.fps))?;
+        let path = format!("observers/{}/rgb.mp4", observer.id);
+        observer.keypoints = None;
+        observer.video = Some(egoexo_session::model::VideoRef {
+            path: path.clone(),
+            start_ns: motion.start_ns,
+            frame_times_ns: Vec::new(),
+        });
+        files.insert(path, bytes);
+    }
+    Ok(files)
+}

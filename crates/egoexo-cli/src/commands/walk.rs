@@ -7,10 +7,9 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use egoexo_core::TrackingMode;
 use egoexo_session::format::save_egoexo_with;
-use egoexo_session::model::VideoRef;
 use egoexo_synth::procedural::walking_circle;
-use egoexo_synth::video::{Appearance, CameraRays, render_frame};
-use egoexo_synth::{SimulatedSession, SynthConfig, simulate};
+use egoexo_synth::video::{Appearance, render_observer_videos};
+use egoexo_synth::{SynthConfig, simulate};
 
 use super::tracking::TrackingArg;
 
@@ -64,7 +63,13 @@ pub fn run(args: Args) -> Result<()> {
     let name = format!("walk-{}s", args.seconds);
     let motion = walking_circle(args.seconds);
     let mut sim = simulate(&motion, &name, &config, args.seed)?;
-    let videos = if args.video.is_some() { observer_videos(&mut sim, &motion)? } else { Default::default() };
+    let videos = if args.video.is_some() {
+        render_observer_videos(&mut sim, &motion, &Appearance::default(), |frames, w, h, fps| {
+            egoexo_detect::native::encode_mp4(frames, w, h, fps, 6_000_000)
+        })?
+    } else {
+        Default::default()
+    };
     save_egoexo_with(&sim.session, videos, &args.out, args.folder)
         .with_context(|| format!("writing {}", args.out.display()))?;
     let bytes = std::fs::metadata(&args.out).map(|m| m.len()).unwrap_or(0);
@@ -76,31 +81,4 @@ pub fn run(args: Args) -> Result<()> {
         if args.folder { String::new() } else { format!(", {:.1} MB", bytes as f64 / 1e6) }
     );
     Ok(())
-}
-
-/// Renders every observer's video of `sim` (the wearer's `motion` seen from the observer's
-/// true head poses), replaces the observer's simulated keypoints by it, and returns the MP4
-/// files by their session paths.
-pub fn observer_videos(
-    sim: &mut SimulatedSession,
-    motion: &egoexo_core::SmplMotion,
-) -> Result<std::collections::BTreeMap<String, Vec<u8>>> {
-    let scale = motion.skeleton.head_height() / egoexo_core::SmplSkeleton::mean_shape().head_height();
-    let floor_y = sim.session.floor.as_ref().map_or(0.0, |f| f.height_m);
-    let look = Appearance::default();
-    let mut files = std::collections::BTreeMap::new();
-    for (o, observer) in sim.session.observers.iter_mut().enumerate() {
-        let rays = CameraRays::new(&observer.camera);
-        let heads = &sim.true_observer_heads[o];
-        let frames = motion.poses.iter().zip(heads).map(|(pose, head)| {
-            render_frame(&motion.skeleton.forward_kinematics(pose), scale, &rays, head, floor_y, &look)
-        });
-        let (w, h) = (observer.camera.width, observer.camera.height);
-        let mp4 = egoexo_detect::native::encode_mp4(frames, w, h, f64::from(motion.fps), 6_000_000)?;
-        let path = format!("observers/{}/rgb.mp4", observer.id);
-        observer.keypoints = None;
-        observer.video = Some(VideoRef { path: path.clone(), start_ns: motion.start_ns, frame_times_ns: Vec::new() });
-        files.insert(path, mp4);
-    }
-    Ok(files)
 }

@@ -22,7 +22,8 @@ pub mod native;
 
 use egoexo_core::aligned::AlignedSession;
 use egoexo_core::crop::CropWindow;
-use egoexo_core::exo_keypoints::{COCO17_COUNT, Keypoint2d};
+use egoexo_core::exo_keypoints::{COCO17_COUNT, ExoKeypoint, Keypoint2d};
+use egoexo_core::glam::Vec2;
 use egoexo_core::region::{DEFAULT_REGION_MARGIN, propose_region};
 use egoexo_core::skeleton::NUM_JOINTS;
 use egoexo_infer::{CropKeypoint, Reconstruction};
@@ -75,6 +76,9 @@ pub struct PlannedFrame {
     /// Where to crop; `None`: the wearer has no region in this frame (not tracked, outside
     /// the session's timeline, or not in view) — no detection.
     pub window: Option<CropWindow>,
+    /// EgoNet's joints projected into the image, per COCO-17 keypoint (`None` for the face
+    /// keypoints and joints outside the image): the reference of the left–right check.
+    pub expected: [Option<Vec2>; COCO17_COUNT],
 }
 
 /// One observer's video and where to look in each of its frames.
@@ -162,29 +166,74 @@ pub fn plan_observer(
             let position = (time_ns - timeline.start_ns) as f64 / frame_ns;
             let nearest = position.round();
             let aligned_frame = (nearest >= 0.0 && (nearest as usize) < timeline.frames).then_some(nearest as usize);
-            let window = aligned_frame.and_then(|f| {
-                let tracked = coarse.valid.get(f).copied().unwrap_or(false)
-                    && aligned_observer.head.valid.get(f).copied().unwrap_or(false);
-                if !tracked {
-                    return None;
-                }
-                let region = propose_region(
-                    &coarse.joints[f][..NUM_JOINTS],
-                    &aligned_observer.camera,
-                    &aligned_observer.head.poses[f],
-                    DEFAULT_REGION_MARGIN,
-                );
-                region.bbox().and_then(|b| CropWindow::around(&b, MIN_CROP_SIDE_PX))
+            let tracked = aligned_frame.filter(|&f| {
+                coarse.valid.get(f).copied().unwrap_or(false)
+                    && aligned_observer.head.valid.get(f).copied().unwrap_or(false)
             });
-            PlannedFrame { sample, time_ns, aligned_frame, window }
+            let (window, expected) = match tracked {
+                Some(f) => {
+                    let (camera, pose) = (&aligned_observer.camera, &aligned_observer.head.poses[f]);
+                    let region = propose_region(&coarse.joints[f][..NUM_JOINTS], camera, pose, DEFAULT_REGION_MARGIN);
+                    let mut expected = [None; COCO17_COUNT];
+                    for k in ExoKeypoint::ALL.into_iter().skip(1) {
+                        expected[k.coco17_index()] = camera
+                            .project_world(coarse.joints[f][k.smpl_joint().index()], pose)
+                            .filter(|px| camera.is_valid_pixel(*px));
+                    }
+                    (region.bbox().and_then(|b| CropWindow::around(&b, MIN_CROP_SIDE_PX)), expected)
+                }
+                None => (None, [None; COCO17_COUNT]),
+            };
+            PlannedFrame { sample, time_ns, aligned_frame, window, expected }
         })
         .collect();
     Ok(ObserverVideoPlan { observer, observer_id: o.id.clone(), video_path: video.path.clone(), track, frames })
 }
 
+/// COCO-17's left–right mirror: keypoint `k`'s counterpart on the other side.
+pub const COCO17_MIRROR: [usize; COCO17_COUNT] = [0, 2, 1, 4, 3, 6, 5, 8, 7, 10, 9, 12, 11, 14, 13, 16, 15];
+
+/// A detection is mirrored (left and right exchanged) when its keypoints, exchanged, lie this
+/// much closer (in summed distance) to EgoNet's projected joints than as detected.
+pub const MIRROR_GAIN: f32 = 0.6;
+
+/// Keypoints below this score are dropped (MoveNet's own demos draw keypoints above 0.3).
+pub const MIN_KEYPOINT_SCORE: f32 = 0.3;
+
+/// Exchanges left and right in `keypoints` when that brings them closer to `expected` (the
+/// wearer's EgoNet joints projected into the image) by more than [`MIRROR_GAIN`] — the
+/// ego-guided check against a single-image pose model's front/back confusion, which puts a
+/// person's left keypoints on their right side. Returns whether it exchanged them.
+pub fn mirror_towards(
+    keypoints: &mut [Option<Keypoint2d>; COCO17_COUNT],
+    expected: &[Option<Vec2>; COCO17_COUNT],
+) -> bool {
+    let cost = |mirrored: bool| -> (f32, usize) {
+        let mut sum = 0.0;
+        let mut n = 0;
+        for k in 0..COCO17_COUNT {
+            let detected = keypoints[if mirrored { COCO17_MIRROR[k] } else { k }];
+            if let (Some(d), Some(e)) = (detected, expected[k]) {
+                sum += d.pixel.distance(e);
+                n += 1;
+            }
+        }
+        (sum, n)
+    };
+    let ((as_detected, n), (mirrored, m)) = (cost(false), cost(true));
+    if n >= 4 && n == m && mirrored < MIRROR_GAIN * as_detected {
+        *keypoints = std::array::from_fn(|k| keypoints[COCO17_MIRROR[k]]);
+        true
+    } else {
+        false
+    }
+}
+
 /// The detections of one observer's video as they come in, frame by frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ObserverDetections {
+    expected: Vec<[Option<Vec2>; COCO17_COUNT]>,
+    mirrored: usize,
     windows: Vec<Option<CropWindow>>,
     track: KeypointTrack,
     detected: usize,
@@ -194,6 +243,8 @@ impl ObserverDetections {
     /// Empty detections for every frame of `plan` (frames never recorded stay undetected).
     pub fn new(plan: &ObserverVideoPlan) -> Self {
         Self {
+            expected: plan.frames.iter().map(|f| f.expected).collect(),
+            mirrored: 0,
             windows: plan.frames.iter().map(|f| f.window).collect(),
             track: KeypointTrack {
                 timestamps_ns: plan.frames.iter().map(|f| f.time_ns).collect(),
@@ -210,12 +261,22 @@ impl ObserverDetections {
         let frames = self.windows.len();
         let window = self.windows.get(index).ok_or(DetectError::NoSuchFrame { index, frames })?;
         let Some(window) = window else { return Ok(()) };
-        self.track.frames[index] = keypoints.map(|k| {
+        let mut frame = keypoints.map(|k| {
             let pixel = window.full_from_normalized(k.at);
-            (pixel.is_finite() && k.score.is_finite()).then_some(Keypoint2d { pixel, score: k.score })
+            (pixel.is_finite() && k.score.is_finite() && k.score >= MIN_KEYPOINT_SCORE)
+                .then_some(Keypoint2d { pixel, score: k.score })
         });
+        if mirror_towards(&mut frame, &self.expected[index]) {
+            self.mirrored += 1;
+        }
+        self.track.frames[index] = frame;
         self.detected += 1;
         Ok(())
+    }
+
+    /// Detections whose left and right were exchanged ([`mirror_towards`]).
+    pub fn mirrored_frames(&self) -> usize {
+        self.mirrored
     }
 
     /// Frames with a detection so far.
@@ -235,4 +296,47 @@ pub struct DetectionProgress {
     pub observer: usize,
     pub done: usize,
     pub total: usize,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn keypoints(points: &[(f32, f32)]) -> [Option<Keypoint2d>; COCO17_COUNT] {
+        std::array::from_fn(|k| points.get(k).map(|&(x, y)| Keypoint2d { pixel: Vec2::new(x, y), score: 0.8 }))
+    }
+
+    /// A body seen from behind by a model that took it for the front: every left keypoint on
+    /// the right. Against EgoNet's projection the check exchanges them; a right detection, or
+    /// one too ambiguous, is left alone.
+    #[test]
+    fn a_mirrored_detection_is_exchanged_towards_egonet() {
+        // x grows with the person's left side (seen from behind); y down the body.
+        let truth: Vec<(f32, f32)> = (0..COCO17_COUNT)
+            .map(|k| {
+                let side = if k == 0 {
+                    0.0
+                } else if k % 2 == 1 {
+                    20.0
+                } else {
+                    -20.0
+                };
+                (100.0 + side, 10.0 * k as f32)
+            })
+            .collect();
+        let expected: [Option<Vec2>; COCO17_COUNT] =
+            std::array::from_fn(|k| (k >= 5).then(|| Vec2::new(truth[k].0, truth[k].1)));
+        let mut right = keypoints(&truth);
+        assert!(!mirror_towards(&mut right, &expected));
+        let swapped: Vec<(f32, f32)> = (0..COCO17_COUNT).map(|k| truth[COCO17_MIRROR[k]]).collect();
+        let mut mirrored = keypoints(&swapped);
+        assert!(mirror_towards(&mut mirrored, &expected));
+        assert_eq!(mirrored, keypoints(&truth));
+        // Nothing to compare against: left as detected.
+        let mut alone = keypoints(&swapped);
+        assert!(!mirror_towards(&mut alone, &[None; COCO17_COUNT]));
+        for k in 0..COCO17_COUNT {
+            assert_eq!(COCO17_MIRROR[COCO17_MIRROR[k]], k);
+        }
+    }
 }

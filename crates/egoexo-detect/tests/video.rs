@@ -31,10 +31,8 @@ fn detected_keypoints_land_on_the_true_joints_and_the_observers_help() {
         KeypointDetector::load(&detector_manifest, &std::fs::read(models.join(&detector_manifest.file.file)).unwrap())
             .unwrap();
     let set = ModelSet::load(manifest.model_set(TrackingMode::ThreePoint).unwrap(), |f| {
-        std::fs::read(models.join(f)).map_err(|e| egoexo_infer::InferError::ReadModel {
-            file: f.to_string(),
-            message: e.to_string(),
-        })
+        std::fs::read(models.join(f))
+            .map_err(|e| egoexo_infer::InferError::ReadModel { file: f.to_string(), message: e.to_string() })
     })
     .unwrap();
     let engine = Engine::new().with_models(set);
@@ -57,7 +55,9 @@ fn detected_keypoints_land_on_the_true_joints_and_the_observers_help() {
     let coarse = engine.reconstruct(&aligned, &egonet, &mut |_| true).unwrap();
     let scale = motion.skeleton.head_height() / SmplSkeleton::mean_shape().head_height();
     let size = detector.input_size();
-    println!("observer | frames | with region | PCK@0.1 | PCK@0.2 | median error (% of box) | mean score");
+    println!(
+        "observer | frames | with region | left–right exchanged | PCK@0.1 | PCK@0.2 | median error (% of box) | mean score"
+    );
     for o in 0..2 {
         let mp4 = &videos[&format!("observers/observer-{}/rgb.mp4", o + 1)];
         let plan = plan_observer(&session, &aligned, &coarse, o, mp4).unwrap();
@@ -72,6 +72,7 @@ fn detected_keypoints_land_on_the_true_joints_and_the_observers_help() {
         })
         .unwrap();
         assert_eq!(n, motion.len());
+        let mirrored = detections.mirrored_frames();
         let track = detections.into_track();
         // Against the true joints projected with the true camera pose, in units of the true
         // box's diagonal (PCK's usual normalisation is the box or torso size).
@@ -103,17 +104,18 @@ fn detected_keypoints_land_on_the_true_joints_and_the_observers_help() {
         let median = errors.get(errors.len() / 2).copied().unwrap_or(f32::NAN);
         let mean_score = scores.iter().sum::<f32>() / scores.len().max(1) as f32;
         println!(
-            "{} | {} | {} | {:.3} | {:.3} | {:.1} | {:.2}",
+            "{} | {} | {} | {} | {:.3} | {:.3} | {:.1} | {:.2}",
             plan.observer_id,
             plan.frames.len(),
             with_region,
+            mirrored,
             pck(0.1),
             pck(0.2),
             100.0 * median,
             mean_score
         );
         assert!(with_region as f32 > 0.5 * plan.frames.len() as f32, "the wearer is in view most of the time");
-        assert!(pck(0.2) > 0.6, "PCK@0.2 {:.3}: the detector does not find the rendered body", pck(0.2));
+        assert!(pck(0.2) > 0.9, "PCK@0.2 {:.3}: the detector does not find the rendered body", pck(0.2));
         session.observers[o].keypoints = Some(track);
     }
 
@@ -121,7 +123,9 @@ fn detected_keypoints_land_on_the_true_joints_and_the_observers_help() {
     // own keypoints.
     let mpjpe = |s: &egoexo_session::Session, method: Method| {
         let aligned = align(s, &AlignOptions::default()).unwrap();
-        let r = engine.reconstruct(&aligned, &ReconstructOptions { method, ..ReconstructOptions::default() }, &mut |_| true).unwrap();
+        let r = engine
+            .reconstruct(&aligned, &ReconstructOptions { method, ..ReconstructOptions::default() }, &mut |_| true)
+            .unwrap();
         let gt = aligned.ground_truth.as_ref().unwrap();
         let mut acc = MetricsAccumulator::new();
         let want: Vec<_> = gt.poses.iter().map(|p| aligned.skeleton.forward_kinematics(p).positions).collect();
@@ -131,6 +135,8 @@ fn detected_keypoints_land_on_the_true_joints_and_the_observers_help() {
     let ego_only = mpjpe(&session, Method::EgoOnly);
     let detected = mpjpe(&session, Method::EgoExo);
     let simulated = mpjpe(&with_simulated_keypoints, Method::EgoExo);
-    println!("MPJPE (cm): ego-only {ego_only:.2} | ego-exo, detected keypoints {detected:.2} | ego-exo, simulated keypoints {simulated:.2}");
-    assert!(detected < ego_only * 1.05, "detected keypoints make it worse: {detected:.2} vs ego-only {ego_only:.2}");
+    println!(
+        "MPJPE (cm): ego-only {ego_only:.2} | ego-exo, detected keypoints {detected:.2} | ego-exo, simulated keypoints {simulated:.2}"
+    );
+    assert!(detected < ego_only, "detected keypoints make it worse: {detected:.2} vs ego-only {ego_only:.2}");
 }

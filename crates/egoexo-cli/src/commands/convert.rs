@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use egoexo_core::TrackingMode;
-use egoexo_session::format::save_egoexo;
+use egoexo_session::format::save_egoexo_with;
 
 use super::session_input::SessionInput;
 
@@ -35,7 +35,8 @@ pub fn run(args: Args) -> Result<()> {
     if args.output.is_dir() && args.force {
         std::fs::remove_dir_all(&args.output).with_context(|| format!("cannot replace {}", args.output.display()))?;
     }
-    save_egoexo(&imported.session, &args.output, args.folder)?;
+    let videos = super::session_input::video_files(&args.input.session, &imported.session)?;
+    save_egoexo_with(&imported.session, videos, &args.output, args.folder)?;
     let s = &imported.session;
     let keypoint_frames: usize = s.observers.iter().filter_map(|o| o.keypoints.as_ref()).map(|k| k.frames.len()).sum();
     println!(

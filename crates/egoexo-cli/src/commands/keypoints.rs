@@ -4,11 +4,11 @@
 use std::path::PathBuf;
 
 use anyhow::{Result, bail};
-use egoexo_session::format::save_egoexo;
+use egoexo_session::format::save_egoexo_with;
 
 use super::detection::{detect_missing_keypoints, print_reports};
 use super::models::models_dir;
-use super::session_input::SessionInput;
+use super::session_input::{SessionInput, video_files};
 use super::tracking::TrackingArg;
 
 #[derive(clap::Args)]
@@ -63,8 +63,10 @@ pub fn run(args: Args) -> Result<()> {
         bail!("no observer of this session has video without keypoints: nothing to detect");
     }
     print_reports(&reports);
+    // The videos go along: the written session still names them.
+    let videos = video_files(&args.input.session, &imported.session)?;
     let as_folder = !args.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("egoexo"));
-    save_egoexo(&imported.session, &args.output, as_folder)?;
+    save_egoexo_with(&imported.session, videos, &args.output, as_folder)?;
     println!("wrote {}", args.output.display());
     if args.json {
         println!("{}", serde_json::to_string(&reports)?);

@@ -111,3 +111,21 @@ fn progress_bar() -> ImportProgress {
         }
     }))
 }
+
+/// The observers' video files of `session`, read from the session at `path` by the paths the
+/// session names them (what a rewritten session must carry along).
+pub fn video_files(
+    path: &std::path::Path,
+    session: &egoexo_session::Session,
+) -> Result<std::collections::BTreeMap<String, Vec<u8>>> {
+    let mut videos = std::collections::BTreeMap::new();
+    if session.observers.iter().all(|o| o.video.is_none()) {
+        return Ok(videos);
+    }
+    let tree = egoexo_session::vfs::FileTree::open(path, egoexo_session::vfs::Limits::default())?;
+    let (_, root) = egoexo_session::import::detect_source(&tree)?;
+    for video in session.observers.iter().filter_map(|o| o.video.as_ref()) {
+        videos.insert(video.path.clone(), root.read(&video.path)?.into_owned());
+    }
+    Ok(videos)
+}

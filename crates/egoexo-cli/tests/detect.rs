@@ -1,0 +1,56 @@
+//! The detector step through the CLI, on video only: `walk --video` writes a session whose
+//! observers have MP4s and no keypoints; `reconstruct` runs the detector step first (its report
+//! on stderr) and uses the observers; `keypoints` writes the session with the detected
+//! keypoints, which then reconstructs with no detection and the same motion; bad requests get
+//! a reason.
+
+mod common;
+
+use std::path::Path;
+
+use common::egoexo;
+
+fn run(args: &[&str]) -> (String, String) {
+    let out = egoexo(args);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "egoexo {args:?} failed:\n{stderr}");
+    (String::from_utf8_lossy(&out.stdout).into_owned(), stderr)
+}
+
+#[test]
+fn observers_with_video_get_keypoints_and_help_the_reconstruction() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("detect");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let s = |p: &Path| p.display().to_string();
+    let session = dir.join("walk.egoexo");
+    run(&["walk", "--seconds", "5", "--observers", "2", "--video", "256", "-o", &s(&session)]);
+    let (inspected, _) = run(&["inspect", &s(&session)]);
+    assert!(inspected.contains("observer-1"), "{inspected}");
+
+    let direct = dir.join("direct.json");
+    let (stdout, stderr) = run(&["reconstruct", &s(&session), "-o", &s(&direct)]);
+    for id in ["observer-1", "observer-2"] {
+        assert!(stderr.contains(&format!("detected keypoints for observer `{id}`")), "{stderr}");
+    }
+    let evidence: usize =
+        stdout.split(" with exo evidence").next().unwrap().rsplit(' ').next().unwrap().parse().unwrap();
+    assert!(evidence > 75, "the observers' detections reach the fusion on most of the 150 frames: {stdout}");
+
+    let with_keypoints = dir.join("with-keypoints.egoexo");
+    let (_, stderr) = run(&["keypoints", &s(&session), "-o", &s(&with_keypoints), "--json"]);
+    assert!(stderr.contains("observer-2"), "{stderr}");
+    let again = dir.join("again.json");
+    let (_, stderr) = run(&["reconstruct", &s(&with_keypoints), "-o", &s(&again)]);
+    assert!(!stderr.contains("detected keypoints"), "the keypoints are in the session now: {stderr}");
+    let a: serde_json::Value = serde_json::from_slice(&std::fs::read(&direct).unwrap()).unwrap();
+    let b: serde_json::Value = serde_json::from_slice(&std::fs::read(&again).unwrap()).unwrap();
+    assert_eq!(a["joints"], b["joints"], "the same keypoints give the same motion");
+
+    // Nothing left to detect, and an unknown observer.
+    let out = egoexo(&["keypoints", &s(&with_keypoints), "-o", &s(&dir.join("x.egoexo"))]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("nothing to detect"));
+    let out = egoexo(&["keypoints", &s(&session), "-o", &s(&dir.join("y.egoexo")), "--observer", "nobody"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--observer nobody"));
+}

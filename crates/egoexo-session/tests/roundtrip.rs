@@ -99,7 +99,12 @@ fn observer(index: usize) -> impl Strategy<Value = Observer> {
             head,
             camera,
             keypoints,
-            video: video.then(|| VideoRef { path: format!("videos/obs-{index}.mp4"), start_ns: START + 5 }),
+            // Every other observer's video with its frame times (the Aria folders' capture times).
+            video: video.then(|| VideoRef {
+                path: format!("videos/obs-{index}.mp4"),
+                start_ns: START + 5,
+                frame_times_ns: if index % 2 == 1 { vec![START + 5, START + 38, START + 72] } else { Vec::new() },
+            }),
             context_features,
         })
 }

@@ -133,7 +133,13 @@ def write_reference(out_dir: Path, manifest_set: dict, references: dict):
 
 def write_manifest(out_dir: Path, model_sets: list, training: dict):
     manifest = {"format_version": 1, "window": WINDOW, "fps": 30.0, "model_sets": model_sets, "training": training}
-    (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
+    path = out_dir / "manifest.json"
+    if path.exists():
+        # The detector (export_movenet.py) is not trained here: its entry stays.
+        detector = json.loads(path.read_text()).get("detector")
+        if detector is not None:
+            manifest["detector"] = detector
+    path.write_text(json.dumps(manifest, indent=2) + "\n")
 
 
 def main():

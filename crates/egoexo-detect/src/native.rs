@@ -153,7 +153,7 @@ mod tests {
                 let p = (y * w + x) * 3;
                 rgb[p] = ((x + 3 * i) % 256) as u8;
                 rgb[p + 1] = ((y * 2) % 256) as u8;
-                rgb[p + 2] = if (x / 16 + y / 16 + i / 4) % 2 == 0 { 220 } else { 30 };
+                rgb[p + 2] = if (x / 16 + y / 16 + i / 4).is_multiple_of(2) { 220 } else { 30 };
             }
         }
         rgb

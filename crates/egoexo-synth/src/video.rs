@@ -64,7 +64,7 @@ impl CameraRays {
                 camera.is_valid_pixel(pixel).then(|| camera.unproject(pixel)).flatten().map(|d| d.normalize())
             })
             .collect();
-        Self { camera: camera.clone(), directions }
+        Self { camera: *camera, directions }
     }
 }
 

@@ -298,7 +298,7 @@ mod tests {
 
     /// Frame `i`: two length-prefixed NAL units of different lengths (so offsets matter).
     fn frame(i: usize) -> EncodedFrame {
-        let key = i % 10 == 0;
+        let key = i.is_multiple_of(10);
         let mut data = vec![0, 0, 0, 2, 0x09, 0xf0]; // access unit delimiter
         let body: Vec<u8> = (0..(3 + i % 7)).map(|j| (i * 31 + j) as u8).collect();
         data.extend_from_slice(&(body.len() as u32 + 1).to_be_bytes());

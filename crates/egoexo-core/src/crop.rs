@@ -51,6 +51,36 @@ impl CropWindow {
     pub fn scale(&self, size: u32) -> f32 {
         self.side / size as f32
     }
+
+    /// The window as a 2D-canvas `drawImage(image, sx, sy, sw, sh, dx, dy, dw, dh)` onto a
+    /// black `size × size` canvas, for an image of `width × height`: the part of the window
+    /// inside the image, and where it lands in the crop. Canvas coordinates put the image's
+    /// top-left *edge* at (0, 0) (ours put that pixel's centre there: +0.5). `None` when the
+    /// window misses the image (the crop is all black).
+    pub fn canvas_draw(&self, width: u32, height: u32, size: u32) -> Option<CanvasDraw> {
+        let min = self.min + Vec2::splat(0.5);
+        let max = min + Vec2::splat(self.side);
+        let source_min = min.max(Vec2::ZERO);
+        let source_max = max.min(Vec2::new(width as f32, height as f32));
+        let extent = source_max - source_min;
+        if !(extent.x > 0.0 && extent.y > 0.0) || size == 0 {
+            return None;
+        }
+        let to_crop = size as f32 / self.side;
+        let dest_min = (source_min - min) * to_crop;
+        Some(CanvasDraw {
+            source: [source_min.x, source_min.y, extent.x, extent.y],
+            dest: [dest_min.x, dest_min.y, extent.x * to_crop, extent.y * to_crop],
+        })
+    }
+}
+
+/// One `drawImage` call that makes a crop ([`CropWindow::canvas_draw`]): `[x, y, width,
+/// height]` of the image (canvas pixels, edges at integers) and of the crop.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CanvasDraw {
+    pub source: [f32; 4],
+    pub dest: [f32; 4],
 }
 
 /// Resamples window `window` of an RGB image (`width × height`, 3 bytes per pixel, rows top
@@ -162,6 +192,48 @@ mod tests {
             let found = window.full_from_normalized(centre);
             prop_assert!((found - dot).length() <= window.scale(size) * 1.5 + 1.0, "{found} vs {dot}");
         }
+    }
+
+    proptest! {
+        /// The canvas draw and [`resample_rgb`] are the same mapping: both ends of the drawn
+        /// source rectangle land, through the window's own mapping, on the ends of the drawn
+        /// destination rectangle, and the source lies inside the image.
+        #[test]
+        fn the_canvas_draw_is_the_windows_mapping_clipped_to_the_image(
+            x in -400f32..1500.0, y in -400f32..1500.0, side in 1f32..900.0,
+            width in 16u32..1600, height in 16u32..1600, size in 16u32..256,
+        ) {
+            let window = CropWindow { min: Vec2::new(x, y), side };
+            let Some(draw) = window.canvas_draw(width, height, size) else {
+                // No overlap: the window lies wholly outside the image's edges.
+                let (lo, hi) = (window.min + 0.5, window.min + 0.5 + side);
+                prop_assert!(hi.x <= 0.0 || hi.y <= 0.0 || lo.x >= width as f32 || lo.y >= height as f32);
+                return Ok(());
+            };
+            let [sx, sy, sw, sh] = draw.source;
+            let [dx, dy, dw, dh] = draw.dest;
+            prop_assert!(sx >= 0.0 && sy >= 0.0 && sw > 0.0 && sh > 0.0);
+            prop_assert!(sx + sw <= width as f32 + 1e-3 && sy + sh <= height as f32 + 1e-3);
+            for (canvas, crop) in [(Vec2::new(sx, sy), Vec2::new(dx, dy)), (Vec2::new(sx + sw, sy + sh), Vec2::new(dx + dw, dy + dh))] {
+                // Canvas edge coordinates → ours (pixel centres) → the crop's normalised coordinates.
+                let u = window.normalized_from_full(canvas - Vec2::splat(0.5));
+                prop_assert!((u * size as f32 - crop).length() < 1e-2 * (1.0 + crop.length()), "{u} vs {crop}");
+            }
+            prop_assert!(dx >= -1e-3 && dy >= -1e-3 && dx + dw <= size as f32 + 1e-2 && dy + dh <= size as f32 + 1e-2);
+        }
+    }
+
+    #[test]
+    fn a_window_inside_the_image_is_drawn_whole() {
+        let window = CropWindow { min: Vec2::new(99.5, 19.5), side: 200.0 };
+        let draw = window.canvas_draw(640, 480, 192).unwrap();
+        assert_eq!(draw.source, [100.0, 20.0, 200.0, 200.0]);
+        assert_eq!(draw.dest, [0.0, 0.0, 192.0, 192.0]);
+        let half_out = CropWindow { min: Vec2::new(-100.5, -0.5), side: 200.0 };
+        let draw = half_out.canvas_draw(640, 480, 100).unwrap();
+        assert_eq!(draw.source, [0.0, 0.0, 100.0, 200.0]);
+        assert_eq!(draw.dest, [50.0, 0.0, 50.0, 100.0]);
+        assert!(CropWindow { min: Vec2::new(700.0, 0.0), side: 50.0 }.canvas_draw(640, 480, 192).is_none());
     }
 
     #[test]

@@ -168,6 +168,28 @@ pub fn write_egoexo_zip(session: &Session) -> Result<Vec<u8>, WriteError> {
         .map_err(|e| WriteError::Encode { what: "the .egoexo zip".into(), message: e.to_string() })
 }
 
+/// [`write_egoexo_zip`] with the files the session refers to but does not hold (its
+/// observers' videos, by their paths) stored in the zip too.
+pub fn write_egoexo_zip_with(session: &Session, extra: BTreeMap<String, Vec<u8>>) -> Result<Vec<u8>, WriteError> {
+    let files = with_extra_files(write_egoexo_files(session)?, extra)?;
+    egoexo_motion_io::npz::write_zip(&files)
+        .map_err(|e| WriteError::Encode { what: "the .egoexo zip".into(), message: e.to_string() })
+}
+
+/// The session's files and `extra`, which must not replace any of them.
+fn with_extra_files(
+    mut files: BTreeMap<String, Vec<u8>>,
+    extra: BTreeMap<String, Vec<u8>>,
+) -> Result<BTreeMap<String, Vec<u8>>, WriteError> {
+    for (name, bytes) in extra {
+        if files.contains_key(&name) {
+            return Err(WriteError::Encode { what: name, message: "is one of the session's own files".into() });
+        }
+        files.insert(name, bytes);
+    }
+    Ok(files)
+}
+
 #[cfg(not(target_arch = "wasm32"))]
 /// Writes the session to `path`: a zip file, or (with `as_folder`) a folder (native only).
 pub fn save_egoexo(session: &Session, path: &std::path::Path, as_folder: bool) -> Result<(), WriteError> {
@@ -185,13 +207,7 @@ pub fn save_egoexo_with(
     as_folder: bool,
 ) -> Result<(), WriteError> {
     let io = |source| WriteError::Io { path: path.display().to_string(), source };
-    let mut files = write_egoexo_files(session)?;
-    for (name, bytes) in extra {
-        if files.contains_key(&name) {
-            return Err(WriteError::Encode { what: name, message: "is one of the session's own files".into() });
-        }
-        files.insert(name, bytes);
-    }
+    let files = with_extra_files(write_egoexo_files(session)?, extra)?;
     for observer in &session.observers {
         if let Some(video) = &observer.video
             && !files.contains_key(&video.path)

@@ -359,7 +359,9 @@ function showSession(s) {
       `tracked on ${w.tracked_percent.toFixed(1)}% of frames, longest gap ${w.longest_gap_s.toFixed(2)} s (${w.source})`]),
     ['floor', s.floor ? `${s.floor.height_m.toFixed(3)} m, from ${s.floor.source}` : 'unknown'],
     ...(s.observers.length === 0 ? [['observers', 'none']] : s.observers.map((o) =>
-      [o.id, `${o.camera}, keypoints in ${o.keypoint_frames} frames`])),
+      [o.id, `${o.camera}, ` + (o.needs_detection
+        ? `video ${o.video}: keypoints found by the detector when reconstructing`
+        : `keypoints in ${o.keypoint_frames} frames`)])),
     ['ground truth', s.ground_truth ? 'yes' : 'no'],
   ]);
   $('session-warnings').replaceChildren(...s.warnings.map((w) => {
@@ -389,6 +391,10 @@ function showScene(scene, summary, how) {
     ['reconstructed', `${summary.valid_frames} of ${summary.frames} frames ${how}`],
     ['exo evidence', `${summary.exo_evidence_frames} frames`],
   ];
+  for (const d of summary.detection ?? []) {
+    const rate = d.ms > 0 ? `, ${(d.detected / (d.ms / 1000)).toFixed(1)} detections/s` : '';
+    rows.push([`detector (${d.observer})`, `the wearer in ${d.detected} of ${d.frames} video frames${rate}`]);
+  }
   if (summary.accuracy) {
     const a = summary.accuracy;
     rows.push(['MPJPE vs ground truth', `${a.ego_exo_mpjpe_cm.toFixed(1)} cm` +

@@ -351,8 +351,9 @@ fn versioned_html(html: &str, prefix: &str) -> String {
     out
 }
 
-/// The model files a manifest lists (`model_sets[].{egonet,gate,fusion}.file`); paths must
-/// stay inside the models folder.
+/// The model files a manifest lists (`model_sets[].{egonet,gate,fusion}.file`, and the
+/// optional `detector.file.file` the worker fetches when a session has observer video);
+/// paths must stay inside the models folder.
 fn model_files(manifest: &[u8]) -> Result<Vec<String>> {
     let value: serde_json::Value = serde_json::from_slice(manifest)?;
     let sets = value["model_sets"].as_array().context("no `model_sets` array")?;
@@ -364,10 +365,16 @@ fn model_files(manifest: &[u8]) -> Result<Vec<String>> {
                 continue;
             }
             let file = set[network]["file"].as_str().with_context(|| format!("no `{network}.file`"))?;
-            if file.starts_with('/') || file.split(['/', '\\']).any(|p| p == "..") {
-                bail!("model file `{file}` leaves the models folder");
-            }
             files.push(file.to_string());
+        }
+    }
+    if let Some(detector) = value.get("detector") {
+        let file = detector["file"]["file"].as_str().context("no `detector.file.file`")?;
+        files.push(file.to_string());
+    }
+    for file in &files {
+        if file.starts_with('/') || file.split(['/', '\\']).any(|p| p == "..") {
+            bail!("model file `{file}` leaves the models folder");
         }
     }
     Ok(files)

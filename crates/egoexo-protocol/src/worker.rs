@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 
 /// The protocol's version; the worker says it in [`WorkerEvent::Ready`], and the page refuses
 /// a worker that speaks another.
-pub const WORKER_PROTOCOL_VERSION: u32 = 4;
+pub const WORKER_PROTOCOL_VERSION: u32 = 5;
 
 /// A job's number, chosen by the page (unique per worker).
 pub type JobId = u32;
@@ -204,6 +204,9 @@ impl ExportFormat {
 }
 
 /// Worker → page.
+// An event is made once and converted to a JS object at once: the summaries' size in the
+// largest variants costs nothing worth a box.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(
     tag = "type",
@@ -379,6 +382,9 @@ pub struct ExportedFile<B> {
 pub enum JobStage {
     /// Reading and aligning the session.
     Import,
+    /// The detector step, before the ego pass when observers have video and no keypoints:
+    /// per video frame, decoded, cropped to the wearer's region and run through the detector.
+    Detection,
     /// Ego features and EgoNet's coarse pose, per window (shared by ego-exo and the overlay).
     EgoPass,
     /// Regions, rays, gates and fusion of ego-exo, per window.
@@ -394,6 +400,7 @@ impl JobStage {
     pub fn label(self) -> &'static str {
         match self {
             JobStage::Import => "importing the session",
+            JobStage::Detection => "detecting keypoints in the observers' video",
             JobStage::EgoPass => "ego pass",
             JobStage::ExoFusion => "exo fusion",
             JobStage::EgoOnlyOverlay => "ego-only overlay",
@@ -541,6 +548,12 @@ pub struct ObserverSummary {
     pub camera: String,
     /// Timeline frames with at least one 2D keypoint.
     pub keypoint_frames: usize,
+    /// The observer's video (its path in the session), when it has one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub video: Option<String>,
+    /// Whether a reconstruction first finds its keypoints in that video (it has none yet).
+    #[serde(default)]
+    pub needs_detection: bool,
 }
 
 /// An imported session, on the models' timeline.
@@ -641,6 +654,27 @@ pub struct ReconstructionSummary {
     /// How a pool of workers shared the job; absent when one worker ran it all.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pool: Option<PoolSummary>,
+    /// The detector step of this job, per observer whose keypoints it found in video (the
+    /// session keeps them: later jobs skip the step).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub detection: Vec<DetectionSummary>,
+}
+
+/// What the detector step did for one observer ([`ReconstructionSummary::detection`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DetectionSummary {
+    pub observer: String,
+    /// The video's path in the session.
+    pub video: String,
+    /// Video frames decoded.
+    pub frames: usize,
+    /// Frames with the wearer's region, each one detection.
+    pub detected: usize,
+    /// Detections whose left and right sides were exchanged to agree with EgoNet's pose.
+    pub mirrored: usize,
+    /// Decoding, cropping and detecting, milliseconds (absent without a clock).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ms: Option<f64>,
 }
 
 /// How a pool of workers shared a reconstruction ([`ReconstructionSummary::pool`]).

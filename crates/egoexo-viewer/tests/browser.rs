@@ -260,7 +260,7 @@ fn read_canvas(viewer: &Viewer) -> Image {
     copy.set_height(height);
     let context: web_sys::CanvasRenderingContext2d = copy.get_context("2d").unwrap().unwrap().dyn_into().unwrap();
     context.draw_image_with_html_canvas_element(&canvas, 0.0, 0.0).unwrap();
-    let data = context.get_image_data(0.0, 0.0, f64::from(width), f64::from(height)).unwrap();
+    let data = context.get_image_data(0, 0, width as i32, height as i32).unwrap();
     Image { rgba: data.data().0, width, height }
 }
 

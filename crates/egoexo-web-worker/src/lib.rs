@@ -5,6 +5,9 @@
 //!   step by step (ego-exo plus the ego-only overlay, one shared ego pass), build the
 //!   viewer's scene, export the motion (AMASS npz, BVH, glb, CSV). Plain Rust; the native
 //!   tests drive it directly.
+//! - [`detection`] — the detector step: observers' video frames, cropped to the region
+//!   EgoNet's coarse pose proposes, through the keypoint detector into the session (the
+//!   runtime decodes with WebCodecs).
 //! - [`scene`] — the viewer's [`egoexo_scene::SceneData`] from the aligned session and its
 //!   reconstructions.
 //! - `runtime` (wasm32 only) — `WorkerApp`, the message loop: requests and events of the
@@ -24,6 +27,7 @@
 //! here reads the clock or spawns threads; timing belongs to the page.
 
 pub mod bench;
+pub mod detection;
 pub mod live;
 pub mod pool;
 #[cfg(target_arch = "wasm32")]

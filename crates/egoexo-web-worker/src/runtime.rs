@@ -51,6 +51,7 @@ type Request = WorkerRequest<JsBytes>;
 type Event = WorkerEvent<JsBytes>;
 
 mod live;
+mod video;
 
 /// Lets the event loop run: resolves on the next task (a round trip through `channel`, one
 /// waiter per channel at a time).
@@ -400,6 +401,18 @@ impl Runtime {
     }
 
     async fn reconstruct_job(&self, job: JobId, overlay: bool) {
+        // Observers with video and no keypoints: the detector step first.
+        match self.detect_keypoints(job).await {
+            Ok(true) => {}
+            Ok(false) => {
+                self.stopped(job);
+                return;
+            }
+            Err(video::DetectFailure::Models(kind, message)) => {
+                return self.post(Event::Error { job: Some(job), stage: ErrorStage::Models, kind, message });
+            }
+            Err(video::DetectFailure::Worker(e)) => return self.fail(Some(job), ErrorStage::Reconstruct, &e),
+        }
         let frames = self.worker.borrow().aligned_session().map_or(0, |a| a.timeline.frames);
         if frames >= POOL_EAGER_FRAMES {
             self.start_helpers();
@@ -815,7 +828,13 @@ impl Runtime {
                     let _ = JsFuture::from(cache.put_with_str(&self.cache_key(f)?, &response)).await;
                 }
             }
-            let wanted = listed.iter().map(|f| self.cache_key(f)).collect::<Result<BTreeSet<_>, _>>()?;
+            // The detector (fetched when a session first needs it) stays too.
+            let detector = self.worker.borrow().detector_file();
+            let wanted = listed
+                .iter()
+                .chain(detector.as_ref())
+                .map(|f| self.cache_key(f))
+                .collect::<Result<BTreeSet<_>, _>>()?;
             if let Ok(keys) = JsFuture::from(cache.keys()).await {
                 for request in Array::from(&keys).iter() {
                     let Ok(request) = request.dyn_into::<web_sys::Request>() else { continue };

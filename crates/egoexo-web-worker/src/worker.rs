@@ -13,11 +13,12 @@ use egoexo_core::aligned::AlignedSession;
 use egoexo_core::camera::Projection;
 use egoexo_core::metrics::MetricsAccumulator;
 use egoexo_core::{SmplMotion, TrackingMode};
+use egoexo_detect::{observers_needing_detection, plan_observer};
 use egoexo_infer::manifest::Manifest;
 use egoexo_infer::models::{Loading, ModelSet};
 use egoexo_infer::{
-    ChunkOutputs, Engine, InferError, LoadedModels, Method, NetworkRuns, Progress, ReconstructOptions, Reconstruction,
-    ReconstructionJob, Stage, StageTimer, StageTimings, TimedStage,
+    ChunkOutputs, Engine, InferError, KeypointDetector, LoadedModels, Method, NetworkRuns, Progress,
+    ReconstructOptions, Reconstruction, ReconstructionJob, Stage, StageTimer, StageTimings, TimedStage,
 };
 use egoexo_motion_io::{ExportError, Format};
 use egoexo_protocol::worker::{
@@ -25,12 +26,15 @@ use egoexo_protocol::worker::{
     ModelsSummary, ObserverSummary, ReconstructionSummary, SessionSummary, WristSummary,
 };
 use egoexo_session::align::DEFAULT_FPS;
-use egoexo_session::format::write_egoexo_zip;
+use egoexo_session::format::{write_egoexo_zip, write_egoexo_zip_with};
+use egoexo_session::import::detect_source;
 use egoexo_session::{
     AlignError, AlignOptions, FileTree, ImportError, ImportOptions, Imported, Limits, align, import_session,
 };
 use egoexo_share::{ShareContents, ShareError, ShareManifest};
 use thiserror::Error;
+
+use crate::detection::{DetectionTask, ObserverDetectionJob};
 
 /// Everything that can go wrong in the worker. Library errors keep their exact messages
 /// (the importers' name the file, line/field and what was expected).
@@ -64,8 +68,12 @@ pub enum WorkerError {
     Take(#[from] egoexo_session::live::TakeError),
     #[error("cannot write the session: {0}")]
     SaveSession(String),
+    #[error("the detector is not loaded yet")]
+    NoDetectorLoaded,
     #[error(transparent)]
     Pool(#[from] crate::pool::PoolError),
+    #[error(transparent)]
+    Detection(#[from] crate::detection::DetectionError),
 }
 
 impl WorkerError {
@@ -83,7 +91,7 @@ impl WorkerError {
             WorkerError::ShareRecording(_) | WorkerError::SaveSession(_) => ErrorKind::Export,
             WorkerError::Live(_) => ErrorKind::Reconstruct,
             WorkerError::Take(_) => ErrorKind::Import,
-            WorkerError::Pool(_) => ErrorKind::Reconstruct,
+            WorkerError::Pool(_) | WorkerError::Detection(_) | WorkerError::NoDetectorLoaded => ErrorKind::Reconstruct,
         }
     }
 
@@ -101,6 +109,11 @@ struct OpenSession {
     summary: SessionSummary,
     /// Import and align of this session (with the worker's clock).
     timings: StageTimings,
+    /// The observers' videos (path in the session → bytes), kept for the detector step and
+    /// for saving the session.
+    videos: BTreeMap<String, Arc<[u8]>>,
+    /// What the detector step did (for the next reconstruction's summary).
+    detection: Vec<protocol::DetectionSummary>,
 }
 
 /// What is shown: a reconstruction made here, or one opened from a share.
@@ -250,6 +263,8 @@ impl std::fmt::Debug for WorkerClock {
 #[derive(Debug, Default)]
 pub struct SessionWorker {
     models: Option<LoadedModels>,
+    /// The keypoint detector, loaded when a session first needs it.
+    detector: Option<Arc<KeypointDetector>>,
     manifest: Option<Manifest>,
     session: Option<OpenSession>,
     results: Option<Results>,
@@ -378,7 +393,12 @@ impl SessionWorker {
         let mut timings = StageTimings::default();
         let imported =
             self.timed(&mut timings, TimedStage::Import, || import_session(tree, &ImportOptions::default()))?;
-        self.open_imported_timed(imported, timings)
+        let videos = session_videos(tree, &imported)?;
+        self.open_imported_timed(imported, timings)?;
+        let open = self.session.as_mut().ok_or(WorkerError::NoSession)?;
+        open.videos = videos;
+        open.summary = session_summary(&open.imported, &open.aligned, &open.videos);
+        Ok(open.summary.clone())
     }
 
     /// Opens a session imported elsewhere (the CLI imports with its own options); replaces
@@ -396,8 +416,10 @@ impl SessionWorker {
         self.results = None;
         let fps = self.fps();
         let aligned = self.timed(&mut timings, TimedStage::Align, || align_for(&imported, fps))?;
-        let summary = session_summary(&imported, &aligned);
-        self.session = Some(OpenSession { imported, aligned, summary: summary.clone(), timings });
+        let videos = BTreeMap::new();
+        let summary = session_summary(&imported, &aligned, &videos);
+        self.session =
+            Some(OpenSession { imported, aligned, summary: summary.clone(), timings, videos, detection: Vec::new() });
         Ok(summary)
     }
 
@@ -409,6 +431,95 @@ impl SessionWorker {
     /// The frame rate the models were trained at (the default timeline rate without models).
     fn fps(&self) -> f32 {
         self.manifest.as_ref().map_or(DEFAULT_FPS, |m| m.fps)
+    }
+
+    /// Observers of the open session whose keypoints the detector step finds first (video
+    /// and no keypoints), by id.
+    pub fn observers_needing_detection(&self) -> Vec<String> {
+        let Some(open) = &self.session else { return Vec::new() };
+        observers_needing_detection(&open.imported.session)
+            .into_iter()
+            .map(|o| open.imported.session.observers[o].id.clone())
+            .collect()
+    }
+
+    /// The detector's file in the models folder, when the manifest has one.
+    pub fn detector_file(&self) -> Option<ModelFileRef> {
+        let file = &self.manifest.as_ref()?.detector.as_ref()?.file;
+        Some(ModelFileRef { file: file.file.clone(), sha256: file.sha256.clone(), bytes: file.bytes })
+    }
+
+    /// Whether the detector is loaded.
+    pub fn has_detector(&self) -> bool {
+        self.detector.is_some()
+    }
+
+    /// Loads the detector from its file's bytes (sha256-checked against the manifest).
+    pub fn load_detector(&mut self, bytes: &[u8]) -> Result<(), WorkerError> {
+        let manifest = self.manifest.as_ref().ok_or(WorkerError::NoModels)?;
+        let observer = self.observers_needing_detection().into_iter().next().unwrap_or_default();
+        let entry = manifest.detector.as_ref().ok_or(crate::detection::DetectionError::NoDetector(observer))?;
+        self.detector = Some(Arc::new(KeypointDetector::load(entry, bytes).map_err(WorkerError::Models)?));
+        Ok(())
+    }
+
+    /// Starts the detector step for the open session ([`Self::observers_needing_detection`];
+    /// `None` when there are none): EgoNet's coarse pose over the session (one pass) plans
+    /// every video frame's crop window. Hand each decoded frame's crop to
+    /// [`DetectionTask::detect_crop`], then call [`Self::finish_detection`].
+    pub fn start_detection(&mut self) -> Result<Option<DetectionTask>, WorkerError> {
+        let Some(first) = self.observers_needing_detection().into_iter().next() else { return Ok(None) };
+        let detector = match &self.detector {
+            Some(detector) => detector.clone(),
+            None if self.detector_file().is_none() => {
+                return Err(crate::detection::DetectionError::NoDetector(first).into());
+            }
+            None => return Err(WorkerError::NoDetectorLoaded),
+        };
+        let engine = self.models.as_ref().ok_or(WorkerError::NoModels)?.offline();
+        let fps = self.fps();
+        let open = self.session.as_mut().ok_or(WorkerError::NoSession)?;
+        if open.aligned.timeline.fps != fps {
+            open.aligned = align_for(&open.imported, fps)?;
+        }
+        let options = ReconstructOptions { method: Method::EgoNet, ..ReconstructOptions::default() };
+        let coarse = engine.reconstruct(&open.aligned, &options, &mut |_| true)?;
+        let session = &open.imported.session;
+        let mut observers = Vec::new();
+        for o in observers_needing_detection(session) {
+            let observer = &session.observers[o];
+            let path = observer.video.as_ref().map(|v| v.path.clone()).unwrap_or_default();
+            let mp4 = open.videos.get(&path).cloned().ok_or_else(|| {
+                crate::detection::DetectionError::MissingVideo { observer: observer.id.clone(), path: path.clone() }
+            })?;
+            let plan = plan_observer(session, &open.aligned, &coarse, o, &mp4)
+                .map_err(crate::detection::DetectionError::from)?;
+            observers.push(ObserverDetectionJob::new(plan, mp4));
+        }
+        Ok(Some(DetectionTask { detector, observers }))
+    }
+
+    /// Puts the keypoints `task` found into the open session (which is aligned again; later
+    /// jobs skip the step) and returns what was done per observer.
+    pub fn finish_detection(&mut self, task: DetectionTask) -> Result<Vec<protocol::DetectionSummary>, WorkerError> {
+        let fps = self.fps();
+        let open = self.session.as_mut().ok_or(WorkerError::NoSession)?;
+        let mut summaries = Vec::new();
+        for (o, track, summary) in task.finish() {
+            let observer = open.imported.session.observers.get_mut(o).ok_or(WorkerError::NoSession)?;
+            observer.keypoints = Some(track);
+            summaries.push(summary);
+        }
+        open.aligned = align_for(&open.imported, fps)?;
+        open.summary = session_summary(&open.imported, &open.aligned, &open.videos);
+        open.detection = summaries.clone();
+        Ok(summaries)
+    }
+
+    /// The open session's summary as it is now (after a detector step it counts the found
+    /// keypoints).
+    pub fn session_summary(&self) -> Option<SessionSummary> {
+        self.session.as_ref().map(|open| open.summary.clone())
     }
 
     /// Starts reconstructing the open session with the full method and, if
@@ -539,6 +650,7 @@ impl SessionWorker {
         let ego_only = reconstructions.next();
         let mut summary = reconstruction_summary(&open.aligned, &ego_exo, ego_only.as_ref(), windows, runs);
         summary.pool = task.pool;
+        summary.detection = open.detection.clone();
         let scene_json = self.timed(&mut timings, TimedStage::Scene, || {
             let scene = crate::scene::build_scene(&open.aligned, &ego_exo, ego_only.as_ref());
             scene.check().map_err(WorkerError::Scene)?;
@@ -608,7 +720,10 @@ impl SessionWorker {
     /// The open session as a `.egoexo` file.
     pub fn save_session(&self) -> Result<ExportedFile, WorkerError> {
         let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
-        let bytes = write_egoexo_zip(&open.imported.session).map_err(|e| WorkerError::SaveSession(e.to_string()))?;
+        // The observers' videos go with it: a saved session opens again as it was.
+        let videos = open.videos.iter().map(|(path, bytes)| (path.clone(), bytes.to_vec())).collect();
+        let bytes = write_egoexo_zip_with(&open.imported.session, videos)
+            .map_err(|e| WorkerError::SaveSession(e.to_string()))?;
         let name: String = open
             .imported
             .session
@@ -738,7 +853,28 @@ fn projection_name(projection: &Projection) -> &'static str {
     }
 }
 
-fn session_summary(imported: &Imported, aligned: &AlignedSession) -> SessionSummary {
+/// The bytes of every video the session's observers name, read from `tree` (the session's
+/// own folder inside it).
+fn session_videos(tree: &FileTree, imported: &Imported) -> Result<BTreeMap<String, Arc<[u8]>>, WorkerError> {
+    let mut videos = BTreeMap::new();
+    if imported.session.observers.iter().all(|o| o.video.is_none()) {
+        return Ok(videos);
+    }
+    let (_, root) = detect_source(tree)?;
+    for observer in &imported.session.observers {
+        let Some(video) = &observer.video else { continue };
+        if root.contains(&video.path) {
+            videos.insert(video.path.clone(), Arc::from(root.read(&video.path)?));
+        }
+    }
+    Ok(videos)
+}
+
+fn session_summary(
+    imported: &Imported,
+    aligned: &AlignedSession,
+    videos: &BTreeMap<String, Arc<[u8]>>,
+) -> SessionSummary {
     let session = &imported.session;
     let mut devices = vec!["head".to_string()];
     devices.extend(session.wearer.left_wrist.as_ref().map(|_| "left_wrist".to_string()));
@@ -751,11 +887,18 @@ fn session_summary(imported: &Imported, aligned: &AlignedSession) -> SessionSumm
             id: o.id.clone(),
             camera: format!("{} {}×{}", projection_name(&o.camera.projection), o.camera.width, o.camera.height),
             keypoint_frames: a.keypoints.iter().filter(|f| f.iter().any(Option::is_some)).count(),
+            video: o.video.as_ref().map(|v| v.path.clone()),
+            needs_detection: o.keypoints.is_none() && o.video.as_ref().is_some_and(|v| videos.contains_key(&v.path)),
         })
         .collect();
     let mut warnings: Vec<String> = imported.warnings.iter().map(ToString::to_string).collect();
     for o in &session.observers {
-        if o.keypoints.is_none() {
+        if let Some(video) = o.video.as_ref().filter(|v| o.keypoints.is_none() && !videos.contains_key(&v.path)) {
+            warnings.push(format!(
+                "observer `{}` names the video `{}`, which is not in the session: it cannot contribute rays",
+                o.id, video.path
+            ));
+        } else if o.keypoints.is_none() && o.video.is_none() {
             warnings.push(format!("observer `{}` has no 2D keypoints: it is shown but cannot contribute rays", o.id));
         }
     }
@@ -835,5 +978,6 @@ fn reconstruction_summary(
         accuracy,
         timings: Vec::new(),
         pool: None,
+        detection: Vec::new(),
     }
 }

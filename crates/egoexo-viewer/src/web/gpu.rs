@@ -306,8 +306,7 @@ pub(crate) fn canvas_rgba(canvas: &HtmlCanvasElement) -> Result<Vec<u8>, ViewerE
         .dyn_into()
         .map_err(|_| ViewerError::Dom("the 2d context is not a CanvasRenderingContext2D".into()))?;
     context.draw_image_with_html_canvas_element(canvas, 0.0, 0.0).map_err(|e| ViewerError::Dom(js_message(e)))?;
-    let data =
-        context.get_image_data(0.0, 0.0, f64::from(w), f64::from(h)).map_err(|e| ViewerError::Dom(js_message(e)))?;
+    let data = context.get_image_data(0, 0, w as i32, h as i32).map_err(|e| ViewerError::Dom(js_message(e)))?;
     Ok(data.data().0)
 }
 

@@ -337,8 +337,11 @@ describe('the WebXR page on an emulated Quest 3', () => {
     const recent = head.slice(-40);
     const hz = ((recent.length - 1) * 1e9) / Number(recent.at(-1).timestampNs - recent[0].timestampNs);
     assert.ok(hz > 10 && hz < 250, `head at ${hz.toFixed(1)} Hz`);
-    // The three streams of one XR frame share its stamp.
-    assert.ok(left.some((f) => f.timestampNs === last.timestampNs) || right.some((f) => f.timestampNs === last.timestampNs));
+    // The three streams of one XR frame share its stamp. The streams arrive separately: under
+    // load the newest head frame's wrists may still be on their way, so look at the recent ones.
+    const wristStamps = new Set([...left, ...right].map((f) => f.timestampNs));
+    const shared = head.slice(-30).filter((f) => wristStamps.has(f.timestampNs)).length;
+    assert.ok(shared > 0, `none of the last ${Math.min(30, head.length)} head stamps is a wrist's`);
 
     const text = await xr.page.locator('#status-panel').innerText();
     assert.match(text, /head · left controller · right controller/);

@@ -32,6 +32,8 @@ pub const LAYERS: &[(&str, &[&str])] = &[
             "egoexo-scene",
             "egoexo-protocol",
             "egoexo-share",
+            "egoexo-video",
+            "egoexo-detect",
         ],
     ),
     ("egoexo-viewer", &["egoexo-core", "egoexo-scene", "egoexo-protocol", "egoexo-video"]),

@@ -4,7 +4,7 @@
 
 import assert from 'node:assert/strict';
 import { execFileSync } from 'node:child_process';
-import { readFileSync, writeFileSync } from 'node:fs';
+import { readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
 import { after, before, describe, test } from 'node:test';
 
@@ -671,6 +671,17 @@ print(json.dumps(report))
       }
       // At import the page said where the keypoints would come from.
       assert.match(await app.text('#session-facts'), /video observers\/observer-1\/rgb\.mp4: keypoints found by the detector/);
+
+      // The same session as a dropped folder (its MP4s among the files): the same step.
+      const folder = join(OUT, 'walk-video-folder');
+      rmSync(folder, { recursive: true, force: true });
+      execFileSync(BIN, ['walk', '--seconds', '4', '--video', '256', '--seed', '3', '--folder', '-o', folder], { stdio: ['ignore', 'ignore', 'inherit'] });
+      // The state is `ready` from the last run until the drop takes effect.
+      await app.page.evaluate(() => { document.body.dataset.state = 'dropped'; });
+      await app.page.setInputFiles('#folder-input', folder);
+      assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
+      const fromFolder = await app.page.evaluate(() => window.egoexo.summary);
+      assert.deepEqual(fromFolder.detection.map((d) => [d.observer, d.detected]), summary.detection.map((d) => [d.observer, d.detected]));
       assert.deepEqual(app.errors, []);
     } finally {
       await app.close();

@@ -35,6 +35,9 @@ enum Command {
     /// Detect the wearer's 2D keypoints in the observers' videos (inside EgoNet's regions) and
     /// write the session with them.
     Keypoints(commands::keypoints::Args),
+    /// Score the shipped detector on photographs with COCO keypoint labels: PCK and OKS on the
+    /// whole frame vs on the region a proposal gives it.
+    DetectorEval(commands::detector_eval::Args),
     /// Reconstruct the wearer's motion and write it as AMASS npz, BVH, glb, CSV or JSON
     /// (observers with video and no keypoints get the detector step first).
     Reconstruct(commands::reconstruct::Args),
@@ -56,6 +59,7 @@ fn main() -> std::process::ExitCode {
         Command::Walk(args) => commands::walk::run(args),
         Command::Eval(args) => commands::eval::run(args),
         Command::Keypoints(args) => commands::keypoints::run(args),
+        Command::DetectorEval(args) => commands::detector_eval::run(args),
         Command::Reconstruct(args) => commands::reconstruct::run(args),
         Command::Serve(args) => commands::serve::run(args),
         Command::Share(args) => commands::share::run(args),

@@ -54,3 +54,45 @@ fn observers_with_video_get_keypoints_and_help_the_reconstruction() {
     let out = egoexo(&["keypoints", &s(&session), "-o", &s(&dir.join("y.egoexo")), "--observer", "nobody"]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("--observer nobody"));
 }
+
+/// The shipped detector on a real photograph with COCO's human-made keypoint labels
+/// (`tests/data/coco`, CC BY 2.0 / CC BY 4.0): the whole frame and the region both find the
+/// lone skier's keypoints; a file that does not match its image gets a reason.
+#[test]
+fn detector_eval_scores_a_real_annotated_photograph() {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/coco");
+    let coco = data.join("person_keypoints_785.json");
+    let (stdout, _) = run(&["detector-eval", "--coco", &coco.display().to_string(), "--json"]);
+    let reports: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    let reports = reports.as_array().unwrap();
+    assert_eq!(reports.len(), 6, "full frame, region and four shifted regions: {stdout}");
+    for report in reports {
+        let all = &report["all"];
+        assert_eq!((all["people"].as_u64(), all["keypoints"].as_u64()), (Some(1), Some(17)), "{report}");
+        let pck = all["pck_02"].as_f64().unwrap();
+        let oks = all["mean_oks"].as_f64().unwrap();
+        assert!(pck >= 0.9 && oks >= 0.8, "{}: PCK@0.2 {pck}, OKS {oks}", report["label"]);
+    }
+    assert_eq!(reports[1]["crop"], "region");
+    assert!(stdout.contains("| full frame |"), "{stdout}");
+
+    // The annotation says another size than the image has; the image is missing.
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("detector-eval");
+    std::fs::create_dir_all(&dir).unwrap();
+    let text = std::fs::read_to_string(&coco).unwrap();
+    let resized = dir.join("resized.json");
+    std::fs::write(&resized, text.replace("\"width\": 640", "\"width\": 641")).unwrap();
+    let images = data.display().to_string();
+    let out = egoexo(&["detector-eval", "--coco", &resized.display().to_string(), "--images", &images]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("000000000785.jpg is 640×425 px") && stderr.contains("641×425"),
+        "{stderr}"
+    );
+    let out = egoexo(&["detector-eval", "--coco", &resized.display().to_string()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("cannot decode") && stderr.contains("000000000785.jpg"),
+        "{stderr}"
+    );
+}

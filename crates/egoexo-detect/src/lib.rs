@@ -19,6 +19,7 @@
 
 #[cfg(feature = "openh264")]
 pub mod native;
+pub mod photos;
 
 use egoexo_core::aligned::AlignedSession;
 use egoexo_core::crop::CropWindow;

@@ -11,6 +11,7 @@ use egoexo_core::TrackingMode;
 use egoexo_core::crop::resample_rgb;
 use egoexo_detect::native::decode_frames;
 use egoexo_detect::{ObserverDetections, observers_needing_detection, plan_observer};
+use egoexo_infer::manifest::Manifest;
 use egoexo_infer::plan::resolve_tracking;
 use egoexo_infer::{Engine, KeypointDetector, Method, ReconstructOptions};
 use egoexo_session::align::{AlignOptions, align};
@@ -19,6 +20,16 @@ use egoexo_session::vfs::{FileTree, Limits};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::models::{load_model_set, read_manifest};
+
+/// The detector `manifest` (read from `models`) names, loaded.
+pub fn load_detector(models: &Path, manifest: &Manifest) -> Result<KeypointDetector> {
+    let detector_manifest = manifest.detector.clone().with_context(|| {
+        format!("{} has no detector: observers with video need one to find the wearer's keypoints", models.display())
+    })?;
+    let detector_path = models.join(&detector_manifest.file.file);
+    let bytes = std::fs::read(&detector_path).with_context(|| format!("cannot read {}", detector_path.display()))?;
+    Ok(KeypointDetector::load(&detector_manifest, &bytes)?)
+}
 
 /// What the detector step did for one observer.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -66,12 +77,7 @@ pub fn detect_missing_keypoints(
         return Ok(Vec::new());
     }
     let manifest = read_manifest(models)?;
-    let detector_manifest = manifest.detector.clone().with_context(|| {
-        format!("{} has no detector: observers with video need one to find the wearer's keypoints", models.display())
-    })?;
-    let detector_path = models.join(&detector_manifest.file.file);
-    let bytes = std::fs::read(&detector_path).with_context(|| format!("cannot read {}", detector_path.display()))?;
-    let detector = KeypointDetector::load(&detector_manifest, &bytes)?;
+    let detector = load_detector(models, &manifest)?;
 
     // EgoNet's coarse pose on the session's timeline: where the regions come from.
     let aligned = align(session, &AlignOptions::default())?;

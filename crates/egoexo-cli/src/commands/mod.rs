@@ -2,6 +2,7 @@
 
 pub mod convert;
 pub mod detection;
+pub mod detector_eval;
 pub mod eval;
 pub mod inspect;
 pub mod keypoints;

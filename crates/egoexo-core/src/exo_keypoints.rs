@@ -117,6 +117,10 @@ impl ExoKeypoint {
 /// body frame in the rest pose: Y up, facing +Z). Scaled with the skeleton.
 pub const NOSE_IN_HEAD_JOINT: Vec3 = Vec3::new(0.0, -0.01, 0.11);
 
+/// COCO-17's left–right mirror: keypoint `k`'s counterpart on the other side (the nose maps
+/// to itself).
+pub const COCO17_MIRROR: [usize; COCO17_COUNT] = [0, 2, 1, 4, 3, 6, 5, 8, 7, 10, 9, 12, 11, 14, 13, 16, 15];
+
 /// One detected 2D keypoint: pixel position and detector score in `[0, 1]`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Keypoint2d {

@@ -25,6 +25,7 @@
 //! iterations (fisheye unprojection, metric accumulation) run in `f64` internally.
 
 pub mod aligned;
+pub mod association;
 pub mod camera;
 pub mod crop;
 pub mod ego_features;

@@ -3,6 +3,9 @@
 //! `egoexo-motion-io`'s.)
 //!
 //! - [`model`] — the in-memory session (wearer, observers, keypoints, subject, ground truth).
+//! - [`capture`] — several participants in one recording: each one's devices and body, what
+//!   each camera saw (assigned or not yet); [`capture::Capture::session_for`] makes one
+//!   participant's session.
 //! - [`import`] — recognises an input and imports it: [`format`](mod@format) (`.egoexo`), Nymeria, Aria
 //!   MPS (one device or the multi-device layout); [`import::import_session`] is the entry.
 //! - [`format`](mod@format) — the native `.egoexo` format: reader and writer (`docs/session-format.md`).
@@ -23,6 +26,7 @@
 
 pub mod align;
 pub mod aria;
+pub mod capture;
 pub mod error;
 pub mod floor;
 pub mod format;

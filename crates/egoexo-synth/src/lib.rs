@@ -13,6 +13,8 @@
 //! - [`detector`] — the 2D keypoint detector model.
 //! - [`cameras`] — Aria RGB (Fisheye624) and pinhole presets.
 //! - [`simulate`] — a full `Session` with ground truth and occlusion labels.
+//! - [`group`] — a `Capture` of 2–3 participants who look at each other, with bystanders;
+//!   every camera's people without identity (for association).
 //! - [`procedural`] — a procedural walking motion for tests and examples.
 //! - [`video`] — observer video frames of the wearer's body, for the detector step's tests.
 
@@ -20,6 +22,7 @@ pub mod cameras;
 pub mod config;
 pub mod detector;
 pub mod devices;
+pub mod group;
 pub mod observers;
 pub mod procedural;
 pub mod rng;

@@ -11,13 +11,48 @@ pub const FPS: f32 = 30.0;
 
 /// `seconds` of walking around a circle of radius 3 m at about 1.1 m/s.
 pub fn walking_circle(seconds: f32) -> SmplMotion {
-    let skeleton = SmplSkeleton::mean_shape().scaled_to_head_height(1.55).expect("procedural motion is valid");
-    let lift = -skeleton.rest_joints().iter().map(|p| p.y).fold(f32::INFINITY, f32::min) - skeleton.rest_joints()[0].y;
+    walking_circle_around(Vec3::ZERO, 3.0, 1.1 / 3.0, 0.0, 1.55, seconds)
+}
+
+/// `seconds` of walking around a circle of `radius` (metres) about `centre` (its y ignored:
+/// feet on y = 0) at `angular_speed` (rad/s; negative: clockwise seen from above), starting at
+/// angle `phase` (0: at `centre + radius · +Z`), for a person whose head is `head_height` m
+/// above the soles. Legs and arms swing at 0.9 Hz whatever the speed.
+pub fn walking_circle_around(
+    centre: Vec3,
+    radius: f32,
+    angular_speed: f32,
+    phase: f32,
+    head_height: f32,
+    seconds: f32,
+) -> SmplMotion {
     let frames = (seconds * FPS) as usize;
+    let turn = if angular_speed < 0.0 { -std::f32::consts::FRAC_PI_2 } else { std::f32::consts::FRAC_PI_2 };
+    walking(head_height, frames, |t| {
+        let angle = phase + t * angular_speed;
+        let position = Vec3::new(centre.x + radius * angle.sin(), 0.0, centre.z + radius * angle.cos());
+        // Facing the direction of travel (tangent of the circle).
+        (position, angle + turn)
+    })
+}
+
+/// `seconds` of walking a straight line from `start` (feet on y = 0) at `velocity` (m/s,
+/// horizontal), for a person whose head is `head_height` m above the soles.
+pub fn walking_line(start: Vec3, velocity: Vec3, head_height: f32, seconds: f32) -> SmplMotion {
+    let frames = (seconds * FPS) as usize;
+    let yaw = velocity.x.atan2(velocity.z);
+    walking(head_height, frames, |t| {
+        (Vec3::new(start.x, 0.0, start.z) + Vec3::new(velocity.x, 0.0, velocity.z) * t, yaw)
+    })
+}
+
+/// A walking gait along `path(t) → (floor position, facing yaw about +Y)`.
+fn walking(head_height: f32, frames: usize, path: impl Fn(f32) -> (Vec3, f32)) -> SmplMotion {
+    let skeleton = SmplSkeleton::mean_shape().scaled_to_head_height(head_height).expect("procedural motion is valid");
+    let lift = -skeleton.rest_joints().iter().map(|p| p.y).fold(f32::INFINITY, f32::min) - skeleton.rest_joints()[0].y;
     let poses = (0..frames)
         .map(|i| {
             let t = i as f32 / FPS;
-            let angle = t * 1.1 / 3.0;
             let swing = 0.45 * (2.0 * std::f32::consts::PI * 0.9 * t).sin();
             let mut body = [Quat::IDENTITY; NUM_BODY_JOINTS];
             let set = |body: &mut [Quat; NUM_BODY_JOINTS], j: SmplJoint, q: Quat| body[j.index() - 1] = q;
@@ -27,10 +62,8 @@ pub fn walking_circle(seconds: f32) -> SmplMotion {
             set(&mut body, SmplJoint::RightKnee, Quat::from_rotation_x(0.6 * (-swing).max(0.0)));
             set(&mut body, SmplJoint::LeftShoulder, Quat::from_rotation_z(-1.2) * Quat::from_rotation_y(0.5 * swing));
             set(&mut body, SmplJoint::RightShoulder, Quat::from_rotation_z(1.2) * Quat::from_rotation_y(0.5 * swing));
-            // Facing the direction of travel (tangent of the circle).
-            let position = Vec3::new(3.0 * angle.sin(), 0.0, 3.0 * angle.cos());
-            let facing = Quat::from_rotation_y(angle + std::f32::consts::FRAC_PI_2);
-            SmplPose { root_orientation: facing, body, translation: position + Vec3::Y * lift }
+            let (position, yaw) = path(t);
+            SmplPose { root_orientation: Quat::from_rotation_y(yaw), body, translation: position + Vec3::Y * lift }
         })
         .collect();
     SmplMotion::new(FPS, 1_000_000_000, skeleton, None, poses).expect("procedural motion is valid")

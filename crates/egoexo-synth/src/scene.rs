@@ -1,5 +1,6 @@
 //! Things that stand between observers and the wearer: furniture (oriented boxes on the floor)
-//! and bystanders (vertical cylinders walking straight lines).
+//! bystanders (vertical cylinders walking straight lines) and, in group scenes, the other
+//! people (cylinders following their recorded paths).
 //!
 //! World Y-up, metres, seconds.
 
@@ -64,34 +65,61 @@ impl Bystander {
 
     /// Whether the segment `a → b` passes through the cylinder at time `t`.
     pub fn blocks(&self, t: f32, a: Vec3, b: Vec3) -> bool {
-        let base = self.position(t);
-        let a2 = Vec2::new(a.x - base.x, a.z - base.z);
-        let d2 = Vec2::new(b.x - a.x, b.z - a.z);
-        // Solve |a2 + s d2| = r for s in [0, 1].
-        let qa = d2.length_squared();
-        let qb = 2.0 * a2.dot(d2);
-        let qc = a2.length_squared() - self.radius * self.radius;
-        let (s0, s1) = if qa < 1e-12 {
-            if qc > 0.0 {
-                return false;
-            }
-            (0.0, 1.0)
-        } else {
-            let disc = qb * qb - 4.0 * qa * qc;
-            if disc < 0.0 {
-                return false;
-            }
-            let root = disc.sqrt();
-            (((-qb - root) / (2.0 * qa)).max(0.0), ((-qb + root) / (2.0 * qa)).min(1.0))
-        };
-        if s0 > s1 {
+        cylinder_blocks(self.position(t), self.radius, self.height, a, b)
+    }
+}
+
+/// A person following a recorded path (a participant of a group scene, or a bystander with a
+/// body), modelled as a vertical cylinder under their head.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Walker {
+    /// Frames per second of `floor`.
+    pub fps: f32,
+    /// Floor position under the person per frame (y = floor height).
+    pub floor: Vec<Vec3>,
+    pub radius: f32,
+    pub height: f32,
+}
+
+impl Walker {
+    /// Whether the segment `a → b` passes through the cylinder at time `t` (the nearest frame;
+    /// before the first or after the last frame the person is where they start or end).
+    pub fn blocks(&self, t: f32, a: Vec3, b: Vec3) -> bool {
+        let Some(last) = self.floor.len().checked_sub(1) else { return false };
+        let frame = ((t * self.fps).round().max(0.0) as usize).min(last);
+        cylinder_blocks(self.floor[frame], self.radius, self.height, a, b)
+    }
+}
+
+/// Whether the segment `a → b` passes through the vertical cylinder standing at `base` (on
+/// the floor) with `radius` and `height`.
+fn cylinder_blocks(base: Vec3, radius: f32, height: f32, a: Vec3, b: Vec3) -> bool {
+    let a2 = Vec2::new(a.x - base.x, a.z - base.z);
+    let d2 = Vec2::new(b.x - a.x, b.z - a.z);
+    // Solve |a2 + s d2| = r for s in [0, 1].
+    let qa = d2.length_squared();
+    let qb = 2.0 * a2.dot(d2);
+    let qc = a2.length_squared() - radius * radius;
+    let (s0, s1) = if qa < 1e-12 {
+        if qc > 0.0 {
             return false;
         }
-        // The segment is inside the cylinder's footprint for s in [s0, s1]; check heights.
-        let (y0, y1) = (a.y + (b.y - a.y) * s0, a.y + (b.y - a.y) * s1);
-        let (lo, hi) = (base.y, base.y + self.height);
-        y0.min(y1) <= hi && y0.max(y1) >= lo
+        (0.0, 1.0)
+    } else {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc < 0.0 {
+            return false;
+        }
+        let root = disc.sqrt();
+        (((-qb - root) / (2.0 * qa)).max(0.0), ((-qb + root) / (2.0 * qa)).min(1.0))
+    };
+    if s0 > s1 {
+        return false;
     }
+    // The segment is inside the cylinder's footprint for s in [s0, s1]; check heights.
+    let (y0, y1) = (a.y + (b.y - a.y) * s0, a.y + (b.y - a.y) * s1);
+    let (lo, hi) = (base.y, base.y + height);
+    y0.min(y1) <= hi && y0.max(y1) >= lo
 }
 
 /// Everything that can occlude, for one session.
@@ -99,6 +127,8 @@ impl Bystander {
 pub struct Scene {
     pub furniture: Vec<Furniture>,
     pub bystanders: Vec<Bystander>,
+    /// People with a recorded path (group scenes).
+    pub walkers: Vec<Walker>,
 }
 
 impl Scene {
@@ -106,7 +136,9 @@ impl Scene {
     pub fn blocks(&self, t: f32, eye: Vec3, point: Vec3) -> bool {
         // Stop just short of the point so a joint touching a surface still counts as seen.
         let end = eye + (point - eye) * 0.98;
-        self.furniture.iter().any(|f| f.blocks(eye, end)) || self.bystanders.iter().any(|b| b.blocks(t, eye, end))
+        self.furniture.iter().any(|f| f.blocks(eye, end))
+            || self.bystanders.iter().any(|b| b.blocks(t, eye, end))
+            || self.walkers.iter().any(|w| w.blocks(t, eye, end))
     }
 }
 

@@ -19,11 +19,12 @@
 
 #[cfg(feature = "openh264")]
 pub mod native;
+pub mod people;
 pub mod photos;
 
 use egoexo_core::aligned::AlignedSession;
 use egoexo_core::crop::CropWindow;
-use egoexo_core::exo_keypoints::{COCO17_COUNT, ExoKeypoint, Keypoint2d};
+use egoexo_core::exo_keypoints::{COCO17_COUNT, Keypoint2d};
 use egoexo_core::glam::Vec2;
 use egoexo_core::region::{DEFAULT_REGION_MARGIN, propose_region};
 use egoexo_core::skeleton::NUM_JOINTS;
@@ -175,12 +176,7 @@ pub fn plan_observer(
                 Some(f) => {
                     let (camera, pose) = (&aligned_observer.camera, &aligned_observer.head.poses[f]);
                     let region = propose_region(&coarse.joints[f][..NUM_JOINTS], camera, pose, DEFAULT_REGION_MARGIN);
-                    let mut expected = [None; COCO17_COUNT];
-                    for k in ExoKeypoint::ALL.into_iter().skip(1) {
-                        expected[k.coco17_index()] = camera
-                            .project_world(coarse.joints[f][k.smpl_joint().index()], pose)
-                            .filter(|px| camera.is_valid_pixel(*px));
-                    }
+                    let expected = people::project_coarse(coarse, aligned_observer, f).unwrap_or([None; COCO17_COUNT]);
                     (region.bbox().and_then(|b| CropWindow::around(&b, MIN_CROP_SIDE_PX)), expected)
                 }
                 None => (None, [None; COCO17_COUNT]),
@@ -191,8 +187,7 @@ pub fn plan_observer(
     Ok(ObserverVideoPlan { observer, observer_id: o.id.clone(), video_path: video.path.clone(), track, frames })
 }
 
-/// COCO-17's left–right mirror: keypoint `k`'s counterpart on the other side.
-pub const COCO17_MIRROR: [usize; COCO17_COUNT] = [0, 2, 1, 4, 3, 6, 5, 8, 7, 10, 9, 12, 11, 14, 13, 16, 15];
+pub use egoexo_core::exo_keypoints::COCO17_MIRROR;
 
 /// A detection is mirrored (left and right exchanged) when its keypoints, exchanged, lie this
 /// much closer (in summed distance) to EgoNet's projected joints than as detected.

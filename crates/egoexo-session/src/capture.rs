@@ -170,6 +170,12 @@ impl Capture {
         Self { name: session.name.clone(), participants, views, floor: session.floor.clone() }
     }
 
+    /// Whether the capture is one session: one participant to reconstruct, every view
+    /// assigned (what every file before version 3 is).
+    pub fn is_one_session(&self) -> bool {
+        self.reconstructed().count() == 1 && self.views.iter().all(|v| matches!(v.people, ViewPeople::Assigned { .. }))
+    }
+
     /// The index of participant `id`.
     pub fn index_of(&self, id: &str) -> Result<usize, CaptureError> {
         self.participants.iter().position(|p| p.id == id).ok_or_else(|| CaptureError::NoSuchParticipant(id.into()))

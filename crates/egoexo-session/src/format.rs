@@ -35,9 +35,11 @@ use serde_json::{Value, json};
 use thiserror::Error;
 
 use crate::aria::trajectory::{Clock, read_closed_loop_trajectory, write_closed_loop_trajectory};
+use crate::capture::{Capture, CaptureError, Participant, View, ViewPeople};
 use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
 use crate::json::{JsonCtx, join};
 use crate::keypoints::{read_keypoints_jsonl, write_keypoints_jsonl};
+use crate::keypoints::{read_people_jsonl, write_people_jsonl};
 use crate::model::{
     ContextFeatureTrack, Floor, GroundTruth, Observer, ObserverOcclusion, Session, SubjectInfo, Trajectory, VideoRef,
     Wearer, WristSource,
@@ -51,9 +53,14 @@ use crate::vfs::{FileTree, normalize_path};
 pub const MANIFEST_FILE: &str = "session.json";
 /// The manifest's `format` value.
 pub const FORMAT_NAME: &str = "egoexo-session";
-/// The manifest version this build writes. Version 2 added the optional `floor` and
-/// `wearer.wrist_source` fields; version 1 files (without them) are read too.
+/// The manifest version this build writes for a one-wearer session. Version 2 added the
+/// optional `floor` and `wearer.wrist_source` fields; version 1 files (without them) are read
+/// too.
 pub const FORMAT_VERSION: u32 = 2;
+/// The manifest version of a capture of several participants ([`Capture`]): `participants`
+/// and `views` instead of `wearer` and `observers`. Every older version reads as a capture
+/// too ([`read_capture`]).
+pub const CAPTURE_FORMAT_VERSION: u32 = 3;
 /// The oldest manifest version this build reads.
 pub const MIN_FORMAT_VERSION: u32 = 1;
 /// Largest accepted angle between a session trajectory's gravity and −Y, degrees (session
@@ -70,6 +77,9 @@ pub enum WriteError {
     /// The session fails validation.
     #[error("the session is invalid: {0}")]
     Invalid(#[from] ImportError),
+    /// The capture's participants and views do not fit together.
+    #[error("the capture is invalid: {0}")]
+    InvalidCapture(#[from] CaptureError),
     /// Building an archive failed.
     #[error("could not build {what}: {message}")]
     Encode { what: String, message: String },
@@ -301,8 +311,8 @@ fn ground_truth_npz(gt: &GroundTruth, path: &str) -> Result<Vec<u8>, WriteError>
     encode(npz.finish(), path)
 }
 
-/// Reads a `.egoexo` session (zip or folder) rooted at `root`.
-pub fn read_egoexo(root: &FileTree) -> Result<(Session, Vec<ImportWarning>), ImportError> {
+/// The manifest of a `.egoexo` rooted at `root`, parsed, with its checked version.
+fn read_manifest_header(root: &FileTree) -> Result<(String, Value, u64), ImportError> {
     let manifest_file = root.display_path(MANIFEST_FILE);
     let ctx = JsonCtx::file(&manifest_file);
     let text = root.read_text(MANIFEST_FILE)?;
@@ -319,32 +329,86 @@ pub fn read_egoexo(root: &FileTree) -> Result<(Session, Vec<ImportWarning>), Imp
         return Err(ctx.invalid("format", format!("\"{FORMAT_NAME}\""), format));
     }
     let version = ctx.field(&doc, "", "version")?;
-    match version.as_u64() {
-        Some(v) if (u64::from(MIN_FORMAT_VERSION)..=u64::from(FORMAT_VERSION)).contains(&v) => {}
-        Some(v) => {
-            return Err(ctx.error(
-                "version",
-                ImportErrorKind::UnsupportedVersion {
-                    got: v.to_string(),
-                    oldest: MIN_FORMAT_VERSION,
-                    newest: FORMAT_VERSION,
-                },
-            ));
-        }
-        None => {
-            return Err(ctx.error(
-                "version",
-                ImportErrorKind::UnsupportedVersion {
-                    got: crate::json::describe(version),
-                    oldest: MIN_FORMAT_VERSION,
-                    newest: FORMAT_VERSION,
-                },
-            ));
-        }
+    let unsupported = |got: String| {
+        ctx.error(
+            "version",
+            ImportErrorKind::UnsupportedVersion { got, oldest: MIN_FORMAT_VERSION, newest: CAPTURE_FORMAT_VERSION },
+        )
+    };
+    let version = match version.as_u64() {
+        Some(v) if (u64::from(MIN_FORMAT_VERSION)..=u64::from(CAPTURE_FORMAT_VERSION)).contains(&v) => v,
+        Some(v) => return Err(unsupported(v.to_string())),
+        None => return Err(unsupported(crate::json::describe(version))),
+    };
+    let conventions = ctx.field(&doc, "", "conventions")?;
+    if *conventions != conventions_json() {
+        return Err(ctx.invalid("conventions", conventions_json().to_string(), conventions));
     }
+    Ok((manifest_file, doc, version))
+}
+
+/// Reads a `.egoexo` session (zip or folder) rooted at `root`. A capture of several
+/// participants (version 3) reads as a session when it has exactly one participant to
+/// reconstruct and every view is assigned; otherwise [`read_capture`] reads it.
+pub fn read_egoexo(root: &FileTree) -> Result<(Session, Vec<ImportWarning>), ImportError> {
+    let (manifest_file, doc, version) = read_manifest_header(root)?;
+    if version >= u64::from(CAPTURE_FORMAT_VERSION) {
+        let (capture, warnings) = read_capture_manifest(root, &manifest_file, &doc)?;
+        return Ok((single_session(&manifest_file, &capture)?, warnings));
+    }
+    read_session_manifest(root, &manifest_file, &doc)
+}
+
+/// The manifest version of the `.egoexo` rooted at `root` (checked to be one this build reads).
+pub fn manifest_version(root: &FileTree) -> Result<u64, ImportError> {
+    Ok(read_manifest_header(root)?.2)
+}
+
+/// The one session a capture stands for: its only participant to reconstruct, with every
+/// view assigned.
+pub fn single_session(file: &str, capture: &Capture) -> Result<Session, ImportError> {
+    let reconstructed: Vec<usize> = capture.reconstructed().collect();
+    let [participant] = reconstructed[..] else {
+        return Err(ImportError::invalid(
+            file,
+            Location::Field("participants".into()),
+            "exactly one participant to reconstruct for a one-wearer session (a capture of several is reconstructed participant by participant)",
+            format!("{} participants to reconstruct", reconstructed.len()),
+        ));
+    };
+    if let Some(index) = capture.views.iter().position(|v| matches!(v.people, ViewPeople::Unassigned(_))) {
+        return Err(ImportError::invalid(
+            file,
+            Location::Field(format!("views[{index}]")),
+            "keypoints assigned to a participant (people without identity need association first)",
+            "people without identity",
+        ));
+    }
+    capture.session_for(participant).map_err(|e| {
+        ImportError::invalid(file, Location::Field("participants".into()), "a valid capture", e.to_string())
+    })
+}
+
+/// Reads a `.egoexo` (zip or folder) rooted at `root` as a capture: version 3 as written,
+/// older versions as their one wearer plus observers ([`Capture::from_session`]).
+pub fn read_capture(root: &FileTree) -> Result<(Capture, Vec<ImportWarning>), ImportError> {
+    let (manifest_file, doc, version) = read_manifest_header(root)?;
+    if version >= u64::from(CAPTURE_FORMAT_VERSION) {
+        return read_capture_manifest(root, &manifest_file, &doc);
+    }
+    let (session, warnings) = read_session_manifest(root, &manifest_file, &doc)?;
+    Ok((Capture::from_session(&session), warnings))
+}
+
+fn read_session_manifest(
+    root: &FileTree,
+    manifest_file: &str,
+    doc: &Value,
+) -> Result<(Session, Vec<ImportWarning>), ImportError> {
+    let ctx = JsonCtx::file(manifest_file);
     let mut reader = ManifestReader { root, ctx, warnings: Vec::new() };
     reader.known_keys(
-        &doc,
+        doc,
         "",
         &[
             "format",
@@ -359,39 +423,209 @@ pub fn read_egoexo(root: &FileTree) -> Result<(Session, Vec<ImportWarning>), Imp
             "floor",
         ],
     );
-    let conventions = ctx.field(&doc, "", "conventions")?;
-    if *conventions != conventions_json() {
-        return Err(ctx.invalid("conventions", conventions_json().to_string(), conventions));
-    }
-    let name = ctx.str(ctx.field(&doc, "", "name")?, "name")?.to_owned();
-    let subject = reader.subject(ctx.field(&doc, "", "subject")?)?;
-    let wearer = reader.wearer(ctx.field(&doc, "", "wearer")?)?;
-    let observers_value = ctx.field(&doc, "", "observers")?;
+    let name = ctx.str(ctx.field(doc, "", "name")?, "name")?.to_owned();
+    let subject = reader.subject(ctx.field(doc, "", "subject")?)?;
+    let wearer = reader.wearer(ctx.field(doc, "", "wearer")?)?;
+    let observers_value = ctx.field(doc, "", "observers")?;
     let mut observers = Vec::new();
     for (i, v) in ctx.array(observers_value, "observers")?.iter().enumerate() {
         observers.push(reader.observer(v, &format!("observers[{i}]"))?);
     }
-    let ground_truth = match ctx.optional(&doc, "", "ground_truth")? {
-        Some(v) => Some(reader.ground_truth(v)?),
+    let ground_truth = match ctx.optional(doc, "", "ground_truth")? {
+        Some(v) => Some(reader.ground_truth(v, "ground_truth")?),
         None => None,
     };
-    let floor = match ctx.optional(&doc, "", "floor")? {
-        Some(v) => {
-            let floor: Floor = serde_json::from_value(v.clone()).map_err(|e| {
-                ctx.invalid(
-                    "floor",
-                    format!("{{\"height_m\": metres, \"source\": {{\"kind\": \"semidense_points\" | \"standing_head\" | \"ground_truth\", …}}}} ({e})"),
-                    v,
-                )
-            })?;
-            if !(floor.height_m.is_finite() && floor.height_m.abs() <= 10_000.0) {
-                return Err(ctx.invalid("floor.height_m", "a finite height within ±10000 m", &v["height_m"]));
-            }
-            Some(floor)
-        }
+    let floor = match ctx.optional(doc, "", "floor")? {
+        Some(v) => Some(read_floor(&ctx, v)?),
         None => None,
     };
     Ok((Session { name, wearer, observers, subject, ground_truth, floor }, reader.warnings))
+}
+
+fn read_capture_manifest(
+    root: &FileTree,
+    manifest_file: &str,
+    doc: &Value,
+) -> Result<(Capture, Vec<ImportWarning>), ImportError> {
+    let ctx = JsonCtx::file(manifest_file);
+    let mut reader = ManifestReader { root, ctx, warnings: Vec::new() };
+    reader.known_keys(
+        doc,
+        "",
+        &["format", "version", "name", "created_by", "conventions", "participants", "views", "floor"],
+    );
+    let name = ctx.str(ctx.field(doc, "", "name")?, "name")?.to_owned();
+    let participants_value = ctx.field(doc, "", "participants")?;
+    let items = ctx.array(participants_value, "participants")?;
+    if items.is_empty() || items.len() > MAX_PARTICIPANTS {
+        return Err(ctx.invalid("participants", format!("1 to {MAX_PARTICIPANTS} participants"), participants_value));
+    }
+    let mut participants = Vec::with_capacity(items.len());
+    for (i, v) in items.iter().enumerate() {
+        participants.push(reader.participant(v, &format!("participants[{i}]"))?);
+    }
+    let mut views = Vec::new();
+    if let Some(list) = ctx.optional(doc, "", "views")? {
+        for (i, v) in ctx.array(list, "views")?.iter().enumerate() {
+            views.push(reader.view(v, &format!("views[{i}]"))?);
+        }
+    }
+    let floor = match ctx.optional(doc, "", "floor")? {
+        Some(v) => Some(read_floor(&ctx, v)?),
+        None => None,
+    };
+    let capture = Capture { name, participants, views, floor };
+    capture
+        .validate()
+        .map_err(|e| ImportError::invalid(manifest_file, Location::File, "a consistent capture", e.to_string()))?;
+    Ok((capture, reader.warnings))
+}
+
+/// Most participants a capture may hold.
+pub const MAX_PARTICIPANTS: usize = 16;
+
+/// The files of a capture of several participants in `.egoexo` layout (manifest version 3;
+/// path → bytes). Validates first: the capture's own consistency, and every participant to
+/// reconstruct as a session ([`Capture::session_for`]).
+pub fn write_capture_files(capture: &Capture) -> Result<BTreeMap<String, Vec<u8>>, WriteError> {
+    capture.validate()?;
+    for p in capture.reconstructed() {
+        crate::validate::validate_session(&capture.session_for(p)?)?;
+    }
+    let gravity = Vec3::new(0.0, -9.81, 0.0);
+    let mut files = BTreeMap::new();
+    let mut put_trajectory = |path: String, t: &Trajectory| {
+        files.insert(
+            path.clone(),
+            write_closed_loop_trajectory(&t.timestamps_ns, &t.poses, "egoexo", gravity).into_bytes(),
+        );
+        json!(path)
+    };
+    let mut participants = Vec::new();
+    let mut data = BTreeMap::new();
+    for p in &capture.participants {
+        let dir = format!("participants/{}", p.id);
+        let mut entry = json!({
+            "id": p.id,
+            "reconstruct": p.reconstruct,
+            "head": put_trajectory(format!("{dir}/head/closed_loop_trajectory.csv"), &p.head),
+            "head_joint_in_device": f32s(&p.head_joint_in_device.to_array()),
+            "subject": subject_json(&p.subject),
+        });
+        for (key, wrist) in [("left_wrist", &p.left_wrist), ("right_wrist", &p.right_wrist)] {
+            if let Some(wrist) = wrist {
+                entry[key] = put_trajectory(format!("{dir}/{key}/closed_loop_trajectory.csv"), wrist);
+            }
+        }
+        if !p.wrist_source.is_devices() {
+            entry["wrist_source"] = serde_json::to_value(&p.wrist_source)
+                .map_err(|e| WriteError::Encode { what: format!("{dir} wrist_source"), message: e.to_string() })?;
+        }
+        if let Some(camera) = &p.camera {
+            entry["camera"] = camera_json(camera);
+        }
+        if let Some(video) = &p.video {
+            entry["video"] = json!({"path": video.path, "start_ns": video.start_ns});
+            if !video.frame_times_ns.is_empty() {
+                let path = format!("{dir}/video_timestamps.csv");
+                data.insert(path.clone(), crate::video::write_frame_timestamps(&video.frame_times_ns).into_bytes());
+                entry["video"]["timestamps"] = json!(path);
+            }
+        }
+        if let Some(features) = &p.context_features {
+            let path = format!("{dir}/context_features.npz");
+            let mut npz = NpzWriter::new();
+            let n = features.timestamps_ns.len() as u64;
+            encode(npz.add("timestamps_ns", &[n], &features.timestamps_ns), &path)?;
+            encode(npz.add("values", &[n, features.dim as u64], &features.values), &path)?;
+            data.insert(path.clone(), encode(npz.finish(), &path)?);
+            entry["context_features"] = json!(path);
+        }
+        if let Some(gt) = &p.ground_truth {
+            let path = format!("{dir}/ground_truth.npz");
+            data.insert(path.clone(), ground_truth_npz(gt, &path)?);
+            entry["ground_truth"] = json!({"motion": path});
+            if !gt.occlusion.is_empty() {
+                entry["ground_truth"]["occlusion_observers"] =
+                    json!(gt.occlusion.iter().map(|o| o.observer_id.clone()).collect::<Vec<_>>());
+            }
+        }
+        participants.push(entry);
+    }
+    let mut views = Vec::new();
+    for view in &capture.views {
+        let dir = format!("views/{}", view.observer);
+        views.push(match &view.people {
+            ViewPeople::Assigned { target, keypoints } => {
+                let path = format!("{dir}/{target}.keypoints.jsonl");
+                data.insert(path.clone(), write_keypoints_jsonl(&view.observer, keypoints).into_bytes());
+                json!({"observer": view.observer, "target": target, "keypoints": path})
+            }
+            ViewPeople::Unassigned(people) => {
+                let path = format!("{dir}/people.jsonl");
+                data.insert(path.clone(), write_people_jsonl(&view.observer, people).into_bytes());
+                json!({"observer": view.observer, "people": path})
+            }
+        });
+    }
+    files.extend(data);
+    let mut manifest = json!({
+        "format": FORMAT_NAME,
+        "version": CAPTURE_FORMAT_VERSION,
+        "name": capture.name,
+        "created_by": format!("egoexo-session {}", env!("CARGO_PKG_VERSION")),
+        "conventions": conventions_json(),
+        "participants": participants,
+        "views": views,
+    });
+    if let Some(floor) = &capture.floor {
+        manifest["floor"] = serde_json::to_value(floor)
+            .map_err(|e| WriteError::Encode { what: "floor".into(), message: e.to_string() })?;
+    }
+    let text = serde_json::to_string_pretty(&manifest)
+        .map_err(|e| WriteError::Encode { what: MANIFEST_FILE.into(), message: e.to_string() })?;
+    files.insert(MANIFEST_FILE.into(), text.into_bytes());
+    Ok(files)
+}
+
+/// The capture as `.egoexo` zip bytes, with `extra` files (its participants' videos) stored
+/// in the zip too.
+pub fn write_capture_zip(capture: &Capture, extra: BTreeMap<String, Vec<u8>>) -> Result<Vec<u8>, WriteError> {
+    let files = with_extra_files(write_capture_files(capture)?, extra)?;
+    egoexo_motion_io::npz::write_zip(&files)
+        .map_err(|e| WriteError::Encode { what: "the .egoexo zip".into(), message: e.to_string() })
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+/// Writes the capture to `path`: a zip file, or (with `as_folder`) a folder (native only).
+pub fn save_capture(
+    capture: &Capture,
+    extra: BTreeMap<String, Vec<u8>>,
+    path: &std::path::Path,
+    as_folder: bool,
+) -> Result<(), WriteError> {
+    let io = |source| WriteError::Io { path: path.display().to_string(), source };
+    if as_folder {
+        let files = with_extra_files(write_capture_files(capture)?, extra)?;
+        crate::vfs::write_dir(path, &files).map_err(io)
+    } else {
+        std::fs::write(path, write_capture_zip(capture, extra)?).map_err(io)
+    }
+}
+
+/// The `floor` object.
+fn read_floor(ctx: &JsonCtx<'_>, v: &Value) -> Result<Floor, ImportError> {
+    let floor: Floor = serde_json::from_value(v.clone()).map_err(|e| {
+        ctx.invalid(
+            "floor",
+            format!("{{\"height_m\": metres, \"source\": {{\"kind\": \"semidense_points\" | \"standing_head\" | \"ground_truth\", …}}}} ({e})"),
+            v,
+        )
+    })?;
+    if !(floor.height_m.is_finite() && floor.height_m.abs() <= 10_000.0) {
+        return Err(ctx.invalid("floor.height_m", "a finite height within ±10000 m", &v["height_m"]));
+    }
+    Ok(floor)
 }
 
 struct ManifestReader<'a> {
@@ -443,34 +677,39 @@ impl ManifestReader<'_> {
     }
 
     fn subject(&mut self, v: &Value) -> Result<SubjectInfo, ImportError> {
+        self.subject_at(v, "subject")
+    }
+
+    fn subject_at(&mut self, v: &Value, path: &str) -> Result<SubjectInfo, ImportError> {
         let ctx = self.ctx;
-        self.known_keys(v, "subject", &["height_m", "betas", "rest_joints"]);
-        let height_m = ctx.optional(v, "subject", "height_m")?.map(|h| ctx.f32(h, "subject.height_m")).transpose()?;
-        let betas = match ctx.optional(v, "subject", "betas")? {
+        self.known_keys(v, path, &["height_m", "betas", "rest_joints"]);
+        let field = |key: &str| join(path, key);
+        let height_m = ctx.optional(v, path, "height_m")?.map(|h| ctx.f32(h, &field("height_m"))).transpose()?;
+        let betas = match ctx.optional(v, path, "betas")? {
             Some(b) => {
-                let items = ctx.array(b, "subject.betas")?;
+                let items = ctx.array(b, &field("betas"))?;
                 if items.is_empty() || items.len() > 300 {
-                    return Err(ctx.invalid("subject.betas", "1 to 300 SMPL shape coefficients", b));
+                    return Err(ctx.invalid(&field("betas"), "1 to 300 SMPL shape coefficients", b));
                 }
                 Some(
                     items
                         .iter()
                         .enumerate()
-                        .map(|(i, x)| ctx.f32(x, &format!("subject.betas[{i}]")))
+                        .map(|(i, x)| ctx.f32(x, &format!("{path}.betas[{i}]")))
                         .collect::<Result<_, _>>()?,
                 )
             }
             None => None,
         };
-        let rest_joints = match ctx.optional(v, "subject", "rest_joints")? {
+        let rest_joints = match ctx.optional(v, path, "rest_joints")? {
             Some(j) => {
-                let items = ctx.array(j, "subject.rest_joints")?;
+                let items = ctx.array(j, &field("rest_joints"))?;
                 if items.len() != NUM_JOINTS {
-                    return Err(ctx.invalid("subject.rest_joints", format!("{NUM_JOINTS} joints [x, y, z]"), j));
+                    return Err(ctx.invalid(&field("rest_joints"), format!("{NUM_JOINTS} joints [x, y, z]"), j));
                 }
                 let mut joints = [Vec3::ZERO; NUM_JOINTS];
                 for (i, (slot, item)) in joints.iter_mut().zip(items).enumerate() {
-                    *slot = Vec3::from_array(ctx.f32_array::<3>(item, &format!("subject.rest_joints[{i}]"))?);
+                    *slot = Vec3::from_array(ctx.f32_array::<3>(item, &format!("{path}.rest_joints[{i}]"))?);
                 }
                 Some(joints)
             }
@@ -590,32 +829,7 @@ impl ManifestReader<'_> {
             None => None,
         };
         let video = match ctx.optional(v, path, "video")? {
-            Some(video) => {
-                let vpath = join(path, "video");
-                let raw = ctx.str(ctx.field(video, &vpath, "path")?, &join(&vpath, "path"))?;
-                let normalized = normalize_path(raw).ok_or_else(|| {
-                    ctx.error(&join(&vpath, "path"), ImportErrorKind::UnsafePath { path: raw.to_owned() })
-                })?;
-                if !self.root.contains(&normalized) {
-                    self.warnings.push(ImportWarning {
-                        file: self.root.display_path(&normalized),
-                        message: format!("the video of observer `{id}` is not inside the session"),
-                    });
-                }
-                let start_ns = ctx.i64(ctx.field(video, &vpath, "start_ns")?, &join(&vpath, "start_ns"))?;
-                let frame_times_ns = match ctx.optional(video, &vpath, "timestamps")? {
-                    Some(t) => {
-                        let file = self.data_path(t, &join(&vpath, "timestamps"))?;
-                        crate::video::read_frame_timestamps(
-                            &self.root.display_path(&file),
-                            &self.root.read(&file)?,
-                            crate::video::SESSION_TIMESTAMP_COLUMN,
-                        )?
-                    }
-                    None => Vec::new(),
-                };
-                Some(VideoRef { path: normalized, start_ns, frame_times_ns })
-            }
+            Some(video) => Some(self.video(video, &join(path, "video"), &id)?),
             None => None,
         };
         let context_features = match ctx.optional(v, path, "context_features")? {
@@ -626,6 +840,160 @@ impl ManifestReader<'_> {
             None => None,
         };
         Ok(Observer { id, head, camera, keypoints, video, context_features })
+    }
+
+    /// An RGB video reference `{path, start_ns, timestamps?}` of `owner`'s camera.
+    fn video(&mut self, video: &Value, vpath: &str, owner: &str) -> Result<VideoRef, ImportError> {
+        let ctx = self.ctx;
+        let raw = ctx.str(ctx.field(video, vpath, "path")?, &join(vpath, "path"))?;
+        let normalized = normalize_path(raw)
+            .ok_or_else(|| ctx.error(&join(vpath, "path"), ImportErrorKind::UnsafePath { path: raw.to_owned() }))?;
+        if !self.root.contains(&normalized) {
+            self.warnings.push(ImportWarning {
+                file: self.root.display_path(&normalized),
+                message: format!("the video of `{owner}` is not inside the session"),
+            });
+        }
+        let start_ns = ctx.i64(ctx.field(video, vpath, "start_ns")?, &join(vpath, "start_ns"))?;
+        let frame_times_ns = match ctx.optional(video, vpath, "timestamps")? {
+            Some(t) => {
+                let file = self.data_path(t, &join(vpath, "timestamps"))?;
+                crate::video::read_frame_timestamps(
+                    &self.root.display_path(&file),
+                    &self.root.read(&file)?,
+                    crate::video::SESSION_TIMESTAMP_COLUMN,
+                )?
+            }
+            None => Vec::new(),
+        };
+        Ok(VideoRef { path: normalized, start_ns, frame_times_ns })
+    }
+
+    /// A participant of a capture (version 3).
+    fn participant(&mut self, v: &Value, path: &str) -> Result<Participant, ImportError> {
+        let ctx = self.ctx;
+        self.known_keys(
+            v,
+            path,
+            &[
+                "id",
+                "reconstruct",
+                "head",
+                "left_wrist",
+                "right_wrist",
+                "wrist_source",
+                "head_joint_in_device",
+                "camera",
+                "video",
+                "context_features",
+                "subject",
+                "ground_truth",
+            ],
+        );
+        let id_path = join(path, "id");
+        let id = ctx.str(ctx.field(v, path, "id")?, &id_path)?.to_owned();
+        if !crate::validate::is_valid_observer_id(&id) {
+            return Err(ctx.invalid(
+                &id_path,
+                "a participant id of 1–64 characters from A–Z, a–z, 0–9, `.`, `_`, `-`",
+                ctx.field(v, path, "id")?,
+            ));
+        }
+        let reconstruct_path = join(path, "reconstruct");
+        let reconstruct = ctx.field(v, path, "reconstruct")?;
+        let reconstruct =
+            reconstruct.as_bool().ok_or_else(|| ctx.invalid(&reconstruct_path, "true or false", reconstruct))?;
+        let head = self.trajectory(ctx.field(v, path, "head")?, &join(path, "head"))?;
+        let wrist = |key: &str| -> Result<Option<Trajectory>, ImportError> {
+            ctx.optional(v, path, key)?.map(|w| self.trajectory(w, &join(path, key))).transpose()
+        };
+        let (left_wrist, right_wrist) = (wrist("left_wrist")?, wrist("right_wrist")?);
+        let head_joint_path = join(path, "head_joint_in_device");
+        let head_joint_in_device =
+            Vec3::from_array(ctx.f32_array::<3>(ctx.field(v, path, "head_joint_in_device")?, &head_joint_path)?);
+        let wrist_source = match ctx.optional(v, path, "wrist_source")? {
+            Some(w) => serde_json::from_value(w.clone()).map_err(|e| {
+                ctx.invalid(
+                    &join(path, "wrist_source"),
+                    format!("{{\"kind\": \"devices\"}} or {{\"kind\": \"hand_tracking\", …}} ({e})"),
+                    w,
+                )
+            })?,
+            None => WristSource::Devices,
+        };
+        let camera = match ctx.optional(v, path, "camera")? {
+            Some(c) => Some(self.camera(c, &join(path, "camera"))?),
+            None => None,
+        };
+        let video = match ctx.optional(v, path, "video")? {
+            Some(video) => Some(self.video(video, &join(path, "video"), &id)?),
+            None => None,
+        };
+        if video.is_some() && camera.is_none() {
+            return Err(ctx.invalid(
+                &join(path, "video"),
+                "a video only with the camera that filmed it (`camera`)",
+                &v["video"],
+            ));
+        }
+        let context_features = match ctx.optional(v, path, "context_features")? {
+            Some(f) => {
+                let file = self.data_path(f, &join(path, "context_features"))?;
+                Some(self.context_features(&file)?)
+            }
+            None => None,
+        };
+        let subject = self.subject_at(ctx.field(v, path, "subject")?, &join(path, "subject"))?;
+        let ground_truth = match ctx.optional(v, path, "ground_truth")? {
+            Some(g) => Some(self.ground_truth(g, &join(path, "ground_truth"))?),
+            None => None,
+        };
+        Ok(Participant {
+            id,
+            reconstruct,
+            head,
+            left_wrist,
+            right_wrist,
+            wrist_source,
+            head_joint_in_device,
+            camera,
+            video,
+            context_features,
+            subject,
+            ground_truth,
+        })
+    }
+
+    /// A view of a capture (version 3): `{observer, target, keypoints}` or `{observer, people}`.
+    fn view(&mut self, v: &Value, path: &str) -> Result<View, ImportError> {
+        let ctx = self.ctx;
+        self.known_keys(v, path, &["observer", "target", "keypoints", "people"]);
+        let observer = ctx.str(ctx.field(v, path, "observer")?, &join(path, "observer"))?.to_owned();
+        let people = match (ctx.optional(v, path, "target")?, ctx.optional(v, path, "people")?) {
+            (Some(target), None) => {
+                let target = ctx.str(target, &join(path, "target"))?.to_owned();
+                let file = self.data_path(ctx.field(v, path, "keypoints")?, &join(path, "keypoints"))?;
+                let keypoints =
+                    read_keypoints_jsonl(&self.root.display_path(&file), &self.root.read_text(&file)?, &observer)?;
+                ViewPeople::Assigned { target, keypoints }
+            }
+            (None, Some(people)) => {
+                let file = self.data_path(people, &join(path, "people"))?;
+                ViewPeople::Unassigned(read_people_jsonl(
+                    &self.root.display_path(&file),
+                    &self.root.read_text(&file)?,
+                    &observer,
+                )?)
+            }
+            _ => {
+                return Err(ctx.invalid(
+                    path,
+                    "either `target` and `keypoints` (one participant's keypoints) or `people` (everyone, without identity)",
+                    v,
+                ));
+            }
+        };
+        Ok(View { observer, people })
     }
 
     fn context_features(&self, file: &str) -> Result<ContextFeatureTrack, ImportError> {
@@ -640,10 +1008,10 @@ impl ManifestReader<'_> {
         Ok(ContextFeatureTrack { timestamps_ns, dim, values })
     }
 
-    fn ground_truth(&mut self, v: &Value) -> Result<GroundTruth, ImportError> {
+    fn ground_truth(&mut self, v: &Value, path: &str) -> Result<GroundTruth, ImportError> {
         let ctx = self.ctx;
-        self.known_keys(v, "ground_truth", &["motion", "occlusion_observers"]);
-        let file = self.data_path(ctx.field(v, "ground_truth", "motion")?, "ground_truth.motion")?;
+        self.known_keys(v, path, &["motion", "occlusion_observers"]);
+        let file = self.data_path(ctx.field(v, path, "motion")?, &join(path, "motion"))?;
         let display = self.root.display_path(&file);
         let npz = Npz::open(&display, self.root.read(&file)?.into_owned(), self.root.limits())?;
         let scalar = |name: &str| npz.array_with_shape(name, &[Some(1)]);
@@ -701,11 +1069,12 @@ impl ManifestReader<'_> {
         let motion = SmplMotion::new(fps, start_ns, skeleton, betas, poses)
             .map_err(|e| ImportError::invalid(&display, Location::File, "a valid SMPL motion", e.to_string()))?;
         let mut occlusion = Vec::new();
-        if let Some(ids) = ctx.optional(v, "ground_truth", "occlusion_observers")? {
-            let ids = ctx.array(ids, "ground_truth.occlusion_observers")?;
+        if let Some(ids) = ctx.optional(v, path, "occlusion_observers")? {
+            let ids_path = join(path, "occlusion_observers");
+            let ids = ctx.array(ids, &ids_path)?;
             let masks = ints(&display, "occluded", npz.array_with_shape("occluded", &[Some(ids.len()), Some(n)])?)?;
             for (o, id) in ids.iter().enumerate() {
-                let observer_id = ctx.str(id, &format!("ground_truth.occlusion_observers[{o}]"))?.to_owned();
+                let observer_id = ctx.str(id, &format!("{ids_path}[{o}]"))?.to_owned();
                 let mut occluded = Vec::with_capacity(n);
                 for (i, &m) in masks[o * n..(o + 1) * n].iter().enumerate() {
                     occluded.push(u16::try_from(m).map_err(|_| {

@@ -34,6 +34,7 @@ use egoexo_core::exo_keypoints::{COCO17_COUNT, Keypoint2d};
 use egoexo_core::glam::Vec2;
 use serde_json::Value;
 
+use crate::capture::PeopleTrack;
 use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
 use crate::json::JsonCtx;
 use crate::model::KeypointTrack;
@@ -123,24 +124,7 @@ pub fn read_keypoints_jsonl(file: &str, text: &str, observer_id: &str) -> Result
                 return Err(ctx.error("timestamp_ns", ImportErrorKind::NonMonotonicTimestamp { previous, got: t }));
             }
         }
-        let kps_value = ctx.field(&doc, "", "keypoints")?;
-        let kps = ctx.array(kps_value, "keypoints")?;
-        if kps.len() != COCO17_COUNT {
-            return Err(ctx.error("keypoints", ImportErrorKind::KeypointCount { got: kps.len() }));
-        }
-        let mut frame = [None; COCO17_COUNT];
-        for (k, (slot, v)) in frame.iter_mut().zip(kps).enumerate() {
-            let path = format!("keypoints[{k}]");
-            if v.is_null() {
-                continue;
-            }
-            let [x, y, score] = ctx.f32_array::<3>(v, &path)?;
-            check_pixel(&ctx, &path, x, y, v)?;
-            if !(0.0..=1.0).contains(&score) {
-                return Err(ctx.invalid(&format!("{path}[2]"), "a score in [0, 1]", &v[2]));
-            }
-            *slot = Some(Keypoint2d { pixel: Vec2::new(x, y), score });
-        }
+        let frame = coco17_frame(&ctx, ctx.field(&doc, "", "keypoints")?, "keypoints")?;
         track.timestamps_ns.push(t);
         track.frames.push(frame);
     }
@@ -152,6 +136,126 @@ pub fn read_keypoints_jsonl(file: &str, text: &str, observer_id: &str) -> Result
         ));
     }
     Ok(track)
+}
+
+/// One person's 17 keypoints, `[[x, y, score] | null; 17]`, at field `path`.
+fn coco17_frame(
+    ctx: &JsonCtx<'_>,
+    value: &Value,
+    path: &str,
+) -> Result<[Option<Keypoint2d>; COCO17_COUNT], ImportError> {
+    let kps = ctx.array(value, path)?;
+    if kps.len() != COCO17_COUNT {
+        return Err(ctx.error(path, ImportErrorKind::KeypointCount { got: kps.len() }));
+    }
+    let mut frame = [None; COCO17_COUNT];
+    for (k, (slot, v)) in frame.iter_mut().zip(kps).enumerate() {
+        let path = format!("{path}[{k}]");
+        if v.is_null() {
+            continue;
+        }
+        let [x, y, score] = ctx.f32_array::<3>(v, &path)?;
+        check_pixel(ctx, &path, x, y, v)?;
+        if !(0.0..=1.0).contains(&score) {
+            return Err(ctx.invalid(&format!("{path}[2]"), "a score in [0, 1]", &v[2]));
+        }
+        *slot = Some(Keypoint2d { pixel: Vec2::new(x, y), score });
+    }
+    Ok(frame)
+}
+
+/// Most people one frame of a people file may list.
+pub const MAX_PEOPLE_PER_FRAME: usize = 64;
+
+/// Reads a people file (JSON lines, one frame per line, strictly increasing timestamps) of
+/// the camera of participant `observer_id`: every person its detector found, without identity:
+/// ```json
+/// {"observer": "participant-2", "timestamp_ns": 1700000000033333333, "people": [[[812.5, 403.0, 0.93], null, …], …]}
+/// ```
+/// Each person is 17 COCO keypoints as in `keypoints.jsonl`; `people` may be empty (nobody
+/// seen) and holds at most [`MAX_PEOPLE_PER_FRAME`].
+pub fn read_people_jsonl(file: &str, text: &str, observer_id: &str) -> Result<PeopleTrack, ImportError> {
+    let mut track = PeopleTrack::default();
+    for (i, line) in text.lines().enumerate() {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let ctx = JsonCtx::line(file, i as u64 + 1);
+        let doc = ctx.parse(line)?;
+        if let Some(id) = ctx.optional(&doc, "", "observer")? {
+            let id = ctx.str(id, "observer")?;
+            if id != observer_id {
+                return Err(ctx.error(
+                    "observer",
+                    ImportErrorKind::ObserverMismatch { expected: observer_id.into(), got: id.into() },
+                ));
+            }
+        }
+        let t = ctx.i64(ctx.field(&doc, "", "timestamp_ns")?, "timestamp_ns")?;
+        if let Some(&previous) = track.timestamps_ns.last() {
+            if t == previous {
+                return Err(ctx.error("timestamp_ns", ImportErrorKind::DuplicateTimestamp(t)));
+            }
+            if t < previous {
+                return Err(ctx.error("timestamp_ns", ImportErrorKind::NonMonotonicTimestamp { previous, got: t }));
+            }
+        }
+        let people_value = ctx.field(&doc, "", "people")?;
+        let people = ctx.array(people_value, "people")?;
+        if people.len() > MAX_PEOPLE_PER_FRAME {
+            return Err(ctx.invalid("people", format!("at most {MAX_PEOPLE_PER_FRAME} people"), people_value));
+        }
+        let frame = people
+            .iter()
+            .enumerate()
+            .map(|(p, person)| coco17_frame(&ctx, person, &format!("people[{p}]")))
+            .collect::<Result<Vec<_>, _>>()?;
+        track.timestamps_ns.push(t);
+        track.frames.push(frame);
+    }
+    if track.frames.is_empty() {
+        return Err(ImportError::new(
+            file,
+            Location::File,
+            ImportErrorKind::Empty { expected: "at least one people record (one JSON object per line)".into() },
+        ));
+    }
+    Ok(track)
+}
+
+/// Writes the people of participant `observer_id`'s camera as JSON lines
+/// ([`read_people_jsonl`]'s format).
+pub fn write_people_jsonl(observer_id: &str, track: &PeopleTrack) -> String {
+    let mut out = String::with_capacity(track.frames.len() * 800);
+    let id = serde_json::to_string(observer_id).unwrap_or_else(|_| "\"\"".into());
+    for (t, people) in track.timestamps_ns.iter().zip(&track.frames) {
+        let _ = write!(out, "{{\"observer\":{id},\"timestamp_ns\":{t},\"people\":[");
+        for (p, person) in people.iter().enumerate() {
+            if p > 0 {
+                out.push(',');
+            }
+            write_coco17(&mut out, person);
+        }
+        out.push_str("]}\n");
+    }
+    out
+}
+
+/// `[[x, y, score] | null; 17]`.
+fn write_coco17(out: &mut String, frame: &[Option<Keypoint2d>; COCO17_COUNT]) {
+    out.push('[');
+    for (k, kp) in frame.iter().enumerate() {
+        if k > 0 {
+            out.push(',');
+        }
+        match kp {
+            Some(kp) => {
+                let _ = write!(out, "[{},{},{}]", json_f32(kp.pixel.x), json_f32(kp.pixel.y), json_f32(kp.score));
+            }
+            None => out.push_str("null"),
+        }
+    }
+    out.push(']');
 }
 
 fn check_pixel(ctx: &JsonCtx<'_>, path: &str, x: f32, y: f32, v: &Value) -> Result<(), ImportError> {
@@ -166,19 +270,9 @@ pub fn write_keypoints_jsonl(observer_id: &str, track: &KeypointTrack) -> String
     let mut out = String::with_capacity(track.frames.len() * 400);
     let id = serde_json::to_string(observer_id).unwrap_or_else(|_| "\"\"".into());
     for (t, frame) in track.timestamps_ns.iter().zip(&track.frames) {
-        let _ = write!(out, "{{\"observer\":{id},\"timestamp_ns\":{t},\"keypoints\":[");
-        for (k, kp) in frame.iter().enumerate() {
-            if k > 0 {
-                out.push(',');
-            }
-            match kp {
-                Some(kp) => {
-                    let _ = write!(out, "[{},{},{}]", json_f32(kp.pixel.x), json_f32(kp.pixel.y), json_f32(kp.score));
-                }
-                None => out.push_str("null"),
-            }
-        }
-        out.push_str("]}\n");
+        let _ = write!(out, "{{\"observer\":{id},\"timestamp_ns\":{t},\"keypoints\":");
+        write_coco17(&mut out, frame);
+        out.push_str("}\n");
     }
     out
 }

@@ -771,10 +771,15 @@ fn cases() -> Vec<Case> {
         // ---- .egoexo manifest ---------------------------------------------------------
         Case {
             name: "unknown schema version",
-            input: Egoexo(|f| edit_json(f, "session.json", |v| v["version"] = 3.into())),
+            input: Egoexo(|f| edit_json(f, "session.json", |v| v["version"] = 4.into())),
             expected: &[
-                "session.json, field `version`: unsupported schema version 3; this build reads versions 1 to 2",
+                "session.json, field `version`: unsupported schema version 4; this build reads versions 1 to 3",
             ],
+        },
+        Case {
+            name: "a version 2 manifest called version 3 (a capture)",
+            input: Egoexo(|f| edit_json(f, "session.json", |v| v["version"] = 3.into())),
+            expected: &["session.json, field `participants`: expected this field to be present"],
         },
         Case {
             name: "version as a string",

@@ -9,7 +9,8 @@ use egoexo_core::glam::{Quat, Vec2, Vec3};
 use egoexo_core::motion::SmplMotion;
 use egoexo_core::rigid::RigidTransform;
 use egoexo_core::skeleton::{SmplPose, SmplSkeleton};
-use egoexo_session::format::{read_egoexo, write_egoexo_files, write_egoexo_zip};
+use egoexo_session::capture::{Capture, PeopleTrack, View, ViewPeople};
+use egoexo_session::format::{read_capture, read_egoexo, write_capture_files, write_egoexo_files, write_egoexo_zip};
 use egoexo_session::import::{ImportOptions, import_session};
 use egoexo_session::model::*;
 use egoexo_session::{FileTree, Limits};
@@ -193,5 +194,49 @@ proptest! {
         prop_assert_eq!(&imported.session, &s);
         let (from_folder, _) = read_egoexo(&support::tree("s", write_egoexo_files(&s).unwrap())).unwrap();
         prop_assert_eq!(&from_folder, &s);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
+
+    /// Any session as a capture in which everyone is reconstructed and the first observer's
+    /// camera also reports everyone it saw without identity (each frame of its keypoints
+    /// `people` times, some frames with nobody): version 3 round-trips exactly.
+    #[test]
+    fn a_capture_of_several_participants_round_trips(s in session(), people in 0usize..3) {
+        let mut capture = Capture::from_session(&s);
+        for p in &mut capture.participants {
+            p.reconstruct = true;
+        }
+        if let Some(kp) = s.observers.iter().find_map(|o| o.keypoints.as_ref().map(|k| (o.id.clone(), k))) {
+            let (id, track) = kp;
+            let frames = track.frames.iter().enumerate().map(|(i, f)| vec![*f; (people + i) % 3]).collect();
+            capture.views.push(View {
+                observer: id,
+                people: ViewPeople::Unassigned(PeopleTrack { timestamps_ns: track.timestamps_ns.clone(), frames }),
+            });
+        }
+        let files = write_capture_files(&capture).unwrap();
+        let manifest: serde_json::Value = serde_json::from_slice(&files["session.json"]).unwrap();
+        prop_assert_eq!(manifest["version"].as_u64(), Some(3));
+        let (back, _) = read_capture(&support::tree("c", files.clone())).unwrap();
+        prop_assert_eq!(&back, &capture);
+        // Several participants to reconstruct: not one session.
+        if capture.participants.len() > 1 {
+            let error = read_egoexo(&support::tree("c", files)).unwrap_err().to_string();
+            prop_assert!(error.contains("participants to reconstruct"), "{}", error);
+        }
+    }
+
+    /// A one-wearer file (version 2) reads as a capture of one wearer and observers that are
+    /// not reconstructed; written as version 3 it still reads as the same session.
+    #[test]
+    fn a_session_is_a_capture_of_one_wearer(s in session()) {
+        let (capture, _) = read_capture(&support::tree("s", write_egoexo_files(&s).unwrap())).unwrap();
+        prop_assert_eq!(&capture, &Capture::from_session(&s));
+        prop_assert_eq!(capture.reconstructed().count(), 1);
+        let (again, _) = read_egoexo(&support::tree("c", write_capture_files(&capture).unwrap())).unwrap();
+        prop_assert_eq!(&again, &s);
     }
 }

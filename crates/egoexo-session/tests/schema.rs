@@ -3,7 +3,8 @@
 
 mod support;
 
-use egoexo_session::format::{read_egoexo, write_egoexo_files};
+use egoexo_session::capture::{PeopleTrack, View, ViewPeople};
+use egoexo_session::format::{read_capture, read_egoexo, write_capture_files, write_egoexo_files};
 use egoexo_session::import::{ImportOptions, import_session};
 use serde_json::Value;
 use support::*;
@@ -45,9 +46,31 @@ fn the_example_validates_and_reads() {
 fn written_manifests_validate() {
     let v = validator();
     let nymeria = import_session(&tree("nymeria", nymeria_fixture()), &ImportOptions::default()).unwrap().session;
-    for (what, files) in
-        [("aria + ground truth", egoexo_fixture_files()), ("nymeria", write_egoexo_files(&nymeria).unwrap())]
-    {
+    // A capture: the Aria fixture's wearer and observers all reconstructed, the first
+    // observer's camera also listing people without identity.
+    let (mut capture, _) = read_capture(&tree("aria", egoexo_fixture_files())).unwrap();
+    for p in &mut capture.participants {
+        p.reconstruct = true;
+    }
+    let ViewPeople::Assigned { keypoints, .. } = &capture.views[0].people else { unreachable!() };
+    let people = PeopleTrack {
+        timestamps_ns: keypoints.timestamps_ns.clone(),
+        frames: keypoints.frames.iter().map(|f| vec![*f, *f]).collect(),
+    };
+    capture.views.push(View { observer: capture.views[0].observer.clone(), people: ViewPeople::Unassigned(people) });
+    let capture_files = write_capture_files(&capture).unwrap();
+    let broken_capture = {
+        let mut m: Value = serde_json::from_slice(&capture_files["session.json"]).unwrap();
+        let last = m["views"].as_array().unwrap().len() - 1;
+        m["views"][last]["target"] = "wearer".into();
+        m
+    };
+    assert!(!v.is_valid(&broken_capture), "a view with both a target and people");
+    for (what, files) in [
+        ("aria + ground truth", egoexo_fixture_files()),
+        ("nymeria", write_egoexo_files(&nymeria).unwrap()),
+        ("capture of three participants", capture_files),
+    ] {
         let manifest: Value = serde_json::from_slice(&files["session.json"]).unwrap();
         assert_valid(&v, &manifest, what);
     }

@@ -16,7 +16,9 @@ pub mod aria_mps;
 pub mod nymeria;
 
 use crate::aria::trajectory::Clock;
+use crate::capture::Capture;
 use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
+use crate::format::CAPTURE_FORMAT_VERSION;
 use crate::keypoints::{CocoTiming, read_keypoints};
 use crate::model::Session;
 use crate::vfs::FileTree;
@@ -166,6 +168,56 @@ pub fn import_session(tree: &FileTree, options: &ImportOptions) -> Result<Import
     }
     warnings.extend(crate::validate::validate_session(&session)?);
     Ok(Imported { session, source, warnings })
+}
+
+/// A capture of several participants, imported ([`import_capture`]).
+#[derive(Clone, Debug)]
+pub struct ImportedCapture {
+    pub capture: Capture,
+    pub source: SourceKind,
+    pub warnings: Vec<ImportWarning>,
+}
+
+/// Recognises and imports the input as a capture: a `.egoexo` of version 3 as written (every
+/// participant to reconstruct checked as a session), anything else through
+/// [`import_session`] as one wearer and their observers ([`Capture::from_session`]).
+/// Keypoint files attach to one-wearer sessions only (a capture's views are in its manifest).
+pub fn import_capture(tree: &FileTree, options: &ImportOptions) -> Result<ImportedCapture, ImportError> {
+    let (source, root) = detect_source(tree)?;
+    if source == SourceKind::Egoexo && crate::format::manifest_version(&root)? >= u64::from(CAPTURE_FORMAT_VERSION) {
+        let (capture, mut warnings) = crate::format::read_capture(&root)?;
+        if !capture.is_one_session() {
+            if let Some(file) = options.keypoint_files.first() {
+                return Err(ImportError::invalid(
+                    &file.name,
+                    Location::File,
+                    "keypoints for a one-wearer session (a capture of several participants names its keypoints in its manifest's `views`)",
+                    format!("a capture of {} participants", capture.participants.len()),
+                ));
+            }
+            for p in capture.reconstructed() {
+                let session = capture.session_for(p).map_err(|e| {
+                    ImportError::invalid(
+                        root.display_path(crate::format::MANIFEST_FILE),
+                        Location::File,
+                        "a valid capture",
+                        e.to_string(),
+                    )
+                })?;
+                warnings.extend(crate::validate::validate_session(&session)?);
+            }
+            return Ok(ImportedCapture { capture, source, warnings });
+        }
+    }
+    let imported = import_session(tree, options)?;
+    Ok(ImportedCapture { capture: Capture::from_session(&imported.session), source, warnings: imported.warnings })
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+/// Opens a folder or zip on disk and imports it as a capture (native only).
+pub fn import_capture_path(path: &std::path::Path, options: &ImportOptions) -> Result<ImportedCapture, ImportError> {
+    let tree = FileTree::open(path, crate::vfs::Limits::default())?;
+    import_capture(&tree, options)
 }
 
 /// Keypoint detections needed before their extent is trusted to tell the image size.

@@ -1,0 +1,60 @@
+//! Broken captures (format version 3) are clear errors naming the manifest field and what was
+//! expected: a view with both a target and people, a video without its camera, a view from a
+//! participant without a camera, two participants with one id, too many people in a frame.
+
+mod support;
+
+use std::collections::BTreeMap;
+
+use egoexo_session::format::{read_capture, write_capture_files};
+use serde_json::Value;
+use support::*;
+
+/// The Aria fixture as a capture of three participants, everyone reconstructed.
+fn capture_files() -> BTreeMap<String, Vec<u8>> {
+    let (mut capture, _) = read_capture(&tree("aria", egoexo_fixture_files())).unwrap();
+    for p in &mut capture.participants {
+        p.reconstruct = true;
+    }
+    write_capture_files(&capture).unwrap()
+}
+
+fn error_after(edit: impl Fn(&mut Value, &mut BTreeMap<String, Vec<u8>>)) -> String {
+    let mut files = capture_files();
+    let mut manifest: Value = serde_json::from_slice(&files["session.json"]).unwrap();
+    edit(&mut manifest, &mut files);
+    files.insert("session.json".into(), serde_json::to_vec(&manifest).unwrap());
+    read_capture(&tree("capture", files)).map(|_| ()).unwrap_err().to_string()
+}
+
+#[test]
+fn broken_captures_name_the_field_and_what_was_expected() {
+    let e = error_after(|m, _| m["views"][0]["people"] = m["views"][0]["keypoints"].clone());
+    assert!(e.contains("field `views[0]`") && e.contains("either `target` and `keypoints`"), "{e}");
+    let e = error_after(|m, _| {
+        m["participants"][1]["video"] = serde_json::json!({"path": "v.mp4", "start_ns": 0});
+        m["participants"][1].as_object_mut().unwrap().remove("camera");
+    });
+    assert!(e.contains("field `participants[1].video`") && e.contains("only with the camera"), "{e}");
+    // The view's keypoints name their camera; a view from one without a camera is refused.
+    let e = error_after(|m, _| m["views"][0]["observer"] = "wearer".into());
+    assert!(e.contains("field `observer`: observer id `observer-1` does not match `wearer`"), "{e}");
+    let e = error_after(|m, files| {
+        let text = String::from_utf8(files["views/observer-1/wearer.keypoints.jsonl"].clone()).unwrap();
+        files.insert("w.jsonl".into(), text.replace("\"observer-1\"", "\"wearer\"").into_bytes());
+        m["views"][0] = serde_json::json!({"observer": "wearer", "target": "observer-2", "keypoints": "w.jsonl"});
+    });
+    assert!(e.contains("view 0 names observer `wearer`, which is no participant with a camera"), "{e}");
+    let e = error_after(|m, _| m["participants"][2]["id"] = m["participants"][1]["id"].clone());
+    assert!(e.contains("are both called"), "{e}");
+    let e = error_after(|m, _| m["participants"][0]["reconstruct"] = "yes".into());
+    assert!(e.contains("field `participants[0].reconstruct`: expected true or false"), "{e}");
+    let e = error_after(|m, files| {
+        let person = format!("[{}]", vec!["null"; 17].join(","));
+        let people = vec![person; 65].join(",");
+        let line = format!("{{\"timestamp_ns\": 1, \"people\": [{people}]}}\n");
+        files.insert("views/observer-1/people.jsonl".into(), line.into_bytes());
+        m["views"][0] = serde_json::json!({"observer": "observer-1", "people": "views/observer-1/people.jsonl"});
+    });
+    assert!(e.contains("people.jsonl, line 1, field `people`: expected at most 64 people"), "{e}");
+}

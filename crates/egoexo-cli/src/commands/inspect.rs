@@ -8,7 +8,8 @@ use egoexo_core::aligned::AlignedSession;
 use egoexo_core::camera::Projection;
 use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
 use egoexo_session::align::{AlignOptions, align};
-use egoexo_session::import::Imported;
+use egoexo_session::capture::ViewPeople;
+use egoexo_session::import::{Imported, ImportedCapture};
 use egoexo_session::model::{Session, Trajectory};
 use serde_json::json;
 
@@ -27,6 +28,9 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    if let Some(capture) = args.input.import_several()? {
+        return inspect_capture(&args, capture);
+    }
     let imported = args.input.import()?;
     let aligned = align(&imported.session, &AlignOptions { fps: args.fps, ..AlignOptions::default() })
         .with_context(|| format!("cannot align {}", args.input.session.display()))?;
@@ -35,6 +39,81 @@ pub fn run(args: Args) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&summary_json(&imported, &aligned, &problems))?);
     } else {
         print!("{}", summary_text(&args, &imported, &aligned, &problems));
+    }
+    Ok(())
+}
+
+/// A capture of several participants: who is in it, what each camera saw, then each
+/// participant to reconstruct as the session they are reconstructed from.
+fn inspect_capture(args: &Args, imported: ImportedCapture) -> Result<()> {
+    let capture = &imported.capture;
+    let mut sessions = Vec::new();
+    for p in capture.reconstructed() {
+        let session = Imported {
+            session: capture.session_for(p)?,
+            source: imported.source,
+            warnings: if sessions.is_empty() { imported.warnings.clone() } else { Vec::new() },
+        };
+        let aligned = align(&session.session, &AlignOptions { fps: args.fps, ..AlignOptions::default() })
+            .with_context(|| format!("cannot align participant `{}`", capture.participants[p].id))?;
+        let problems = problems(&session, &aligned);
+        sessions.push((session, aligned, problems));
+    }
+    let views: Vec<_> = capture
+        .views
+        .iter()
+        .map(|v| match &v.people {
+            ViewPeople::Assigned { target, keypoints } => {
+                json!({"observer": v.observer, "target": target, "frames": keypoints.frames.len()})
+            }
+            ViewPeople::Unassigned(people) => json!({
+                "observer": v.observer,
+                "frames": people.frames.len(),
+                "people": people.frames.iter().map(Vec::len).sum::<usize>(),
+            }),
+        })
+        .collect();
+    if args.json {
+        let participants: Vec<_> = capture
+            .participants
+            .iter()
+            .map(|p| json!({"id": p.id, "reconstruct": p.reconstruct, "camera": p.camera.is_some(), "video": p.video.is_some()}))
+            .collect();
+        let sessions: Vec<_> = sessions.iter().map(|(i, a, pr)| summary_json(i, a, pr)).collect();
+        let out = json!({"capture": capture.name, "participants": participants, "views": views, "sessions": sessions});
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    let mut out = String::new();
+    let _ = writeln!(out, "capture {} ({} participants)", capture.name, capture.participants.len());
+    for p in &capture.participants {
+        let _ = writeln!(
+            out,
+            "  participant {}: {}{}{}",
+            p.id,
+            if p.reconstruct { "reconstructed" } else { "observes only" },
+            if p.camera.is_some() { ", RGB camera" } else { "" },
+            if p.video.is_some() { " with video" } else { "" },
+        );
+    }
+    for v in &capture.views {
+        let _ = match &v.people {
+            ViewPeople::Assigned { target, keypoints } => {
+                writeln!(out, "  view {} → {}: {} frames of keypoints", v.observer, target, keypoints.frames.len())
+            }
+            ViewPeople::Unassigned(people) => writeln!(
+                out,
+                "  view {}: {} people without identity over {} frames (associated with the participants' EgoNet poses at reconstruction)",
+                v.observer,
+                people.frames.iter().map(Vec::len).sum::<usize>(),
+                people.frames.len()
+            ),
+        };
+    }
+    print!("{out}");
+    for (session, aligned, problems) in &sessions {
+        println!();
+        print!("{}", summary_text(args, session, aligned, problems));
     }
     Ok(())
 }

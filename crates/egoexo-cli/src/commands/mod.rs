@@ -1,5 +1,6 @@
 //! One module per subcommand.
 
+pub mod capture;
 pub mod convert;
 pub mod detection;
 pub mod detector_eval;

@@ -11,8 +11,10 @@ use egoexo_infer::plan::resolve_tracking;
 use egoexo_infer::{Engine, Method, Progress, ReconstructOptions, Stage, StageTimer, StageTimings, TimedStage};
 use egoexo_motion_io::{Format, write};
 use egoexo_session::align::{AlignOptions, align};
+use egoexo_session::import::ImportedCapture;
 use indicatif::{ProgressBar, ProgressStyle};
 
+use super::capture::{mpjpe_cm, participant_output, print_association, reconstruct_capture};
 use super::detection::{detect_missing_keypoints, print_reports};
 use super::models::{load_model_set, models_dir, read_manifest};
 use super::session_input::SessionInput;
@@ -59,6 +61,9 @@ pub fn run(args: Args) -> Result<()> {
     }
     let json = args.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("json"));
     let format = if json { None } else { Some(Format::from_path(&args.output.to_string_lossy())?) };
+    if let Some(imported) = args.input.import_several()? {
+        return run_capture(&args, imported, format);
+    }
 
     let started = Instant::now();
     let mut clock = move || started.elapsed().as_secs_f64() * 1e3;
@@ -129,6 +134,57 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(runs) = args.timings {
         print_timings(&args, &engine, &options, method, format, (timings, recon.motion.len()), runs.max(1))?;
         print_scaling(&engine, &aligned, &options, method, threads, runs.max(1))?;
+    }
+    Ok(())
+}
+
+/// A capture of several participants: every participant's motion, each in its own file
+/// ([`participant_output`]).
+fn run_capture(args: &Args, imported: ImportedCapture, format: Option<Format>) -> Result<()> {
+    if args.timings.is_some() {
+        bail!("--timings measures one session; this is a capture of several participants");
+    }
+    for warning in &imported.warnings {
+        eprintln!("warning: {warning}");
+    }
+    let outputs: Vec<PathBuf> = imported
+        .capture
+        .reconstructed()
+        .map(|p| participant_output(&args.output, &imported.capture.participants[p].id))
+        .collect();
+    if let Some(existing) = outputs.iter().find(|o| o.exists())
+        && !args.force
+    {
+        bail!("{} exists; pass --force to replace it", existing.display());
+    }
+    let done = reconstruct_capture(
+        &args.input.session,
+        imported.capture,
+        &models_dir(args.models.as_deref()),
+        args.tracking.map(TrackingMode::from),
+        args.ego_only,
+        args.fps,
+    )?;
+    print_association(&done.association);
+    for (p, output) in done.participants.iter().zip(&outputs) {
+        let recon = &p.reconstruction;
+        std::fs::write(output, encode(format, recon)?).with_context(|| format!("cannot write {}", output.display()))?;
+        let evidence = recon.exo_evidence.iter().filter(|v| **v).count();
+        let mpjpe = match mpjpe_cm(p)? {
+            Some(cm) => format!("; MPJPE {cm:.2} cm against the capture's ground truth"),
+            None => String::new(),
+        };
+        println!(
+            "wrote {} (participant {}, {}, {}-point): {} frames at {} fps, {} with exo evidence from {} observers{mpjpe}",
+            output.display(),
+            p.id,
+            p.method,
+            p.tracking.points(),
+            recon.motion.len(),
+            recon.motion.fps,
+            evidence,
+            p.session.observers.iter().filter(|o| o.keypoints.is_some()).count()
+        );
     }
     Ok(())
 }

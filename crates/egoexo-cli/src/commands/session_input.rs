@@ -6,8 +6,13 @@ use anyhow::{Context, Result, bail};
 use egoexo_session::aria::trajectory::Clock;
 use std::sync::{Arc, Mutex};
 
-use egoexo_session::import::{ImportOptions, ImportProgress, Imported, KeypointFile, import_path};
+use egoexo_session::format::{CAPTURE_FORMAT_VERSION, manifest_version};
+use egoexo_session::import::{
+    ImportOptions, ImportProgress, Imported, ImportedCapture, KeypointFile, SourceKind, detect_source, import_capture,
+    import_path,
+};
 use egoexo_session::keypoints::CocoTiming;
+use egoexo_session::vfs::{FileTree, Limits};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 /// Which MPS timestamp column puts the devices on one clock.
@@ -51,11 +56,29 @@ impl SessionInput {
     pub fn import(&self) -> Result<Imported> {
         self.options.import(&self.session)
     }
+
+    /// The input as a capture of several participants, when it is one (a `.egoexo` of
+    /// version 3 with more than one participant to reconstruct, or people without identity);
+    /// `None` for everything that is one session.
+    pub fn import_several(&self) -> Result<Option<ImportedCapture>> {
+        let tree = FileTree::open(&self.session, Limits::default())?;
+        let (source, root) = detect_source(&tree)?;
+        if source != SourceKind::Egoexo || manifest_version(&root)? < u64::from(CAPTURE_FORMAT_VERSION) {
+            return Ok(None);
+        }
+        let imported = import_capture(&tree, &self.options.import_options()?)?;
+        Ok((!imported.capture.is_one_session()).then_some(imported))
+    }
 }
 
 impl ImportArgs {
     /// Imports the session at `path` with these options.
     pub fn import(&self, path: &std::path::Path) -> Result<Imported> {
+        Ok(import_path(path, &self.import_options()?)?)
+    }
+
+    /// The importer's options these arguments ask for (keypoint files read).
+    pub fn import_options(&self) -> Result<ImportOptions> {
         let mut keypoint_files = Vec::new();
         for spec in &self.keypoints {
             let Some((id, path)) = spec.split_once('=') else {
@@ -73,7 +96,7 @@ impl ImportArgs {
             keypoint_files,
             progress: Some(progress_bar()),
         };
-        Ok(import_path(path, &options)?)
+        Ok(options)
     }
 }
 

@@ -6,7 +6,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use egoexo_core::TrackingMode;
-use egoexo_session::format::save_egoexo_with;
+use egoexo_session::format::{save_capture, save_egoexo_with};
+use egoexo_synth::group::{GroupConfig, group_walk, simulate_group};
 use egoexo_synth::procedural::walking_circle;
 use egoexo_synth::video::{Appearance, render_observer_videos};
 use egoexo_synth::{SynthConfig, simulate};
@@ -24,6 +25,14 @@ pub struct Args {
     /// Observers watching the wearer.
     #[arg(long, default_value_t = 2)]
     pub observers: usize,
+    /// Participants wearing glasses (2 or 3: a capture of several people who walk together
+    /// and look at each other, `egoexo_synth::group`, written as format version 3 with every
+    /// camera's people unidentified; `--observers` and `--video` do not apply).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=3))]
+    pub participants: u8,
+    /// People without glasses crossing a capture of several participants.
+    #[arg(long, default_value_t = 2)]
+    pub bystanders: usize,
     /// Wearer tracking: 1 (glasses), 3 (glasses + wrist devices), 3-hand-tracking.
     #[arg(long, value_enum, default_value = "3")]
     pub tracking: TrackingArg,
@@ -46,6 +55,9 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     if !(args.seconds.is_finite() && args.seconds > 0.0 && args.seconds <= MAX_SECONDS) {
         bail!("--seconds {}: expected a length above 0 and at most {MAX_SECONDS} s", args.seconds);
+    }
+    if args.participants > 1 {
+        return write_group(&args);
     }
     let config = SynthConfig {
         tracking: TrackingMode::from(args.tracking),
@@ -78,6 +90,35 @@ pub fn run(args: Args) -> Result<()> {
         args.out.display(),
         args.seconds,
         args.observers,
+        if args.folder { String::new() } else { format!(", {:.1} MB", bytes as f64 / 1e6) }
+    );
+    Ok(())
+}
+
+/// `--participants 2|3`: a group walk with bystanders, as a capture.
+fn write_group(args: &Args) -> Result<()> {
+    if args.video.is_some() {
+        bail!("--video films one wearer for their observers; a capture of several participants has keypoints");
+    }
+    if args.bystanders > 20 {
+        bail!("--bystanders {}: at most 20", args.bystanders);
+    }
+    let config = GroupConfig {
+        tracking: TrackingMode::from(args.tracking),
+        bystanders: args.bystanders,
+        ..GroupConfig::default()
+    };
+    let name = format!("group-{}x{}s", args.participants, args.seconds);
+    let sim = simulate_group(&group_walk(usize::from(args.participants), args.seconds), &name, &config, args.seed)?;
+    save_capture(&sim.capture, Default::default(), &args.out, args.folder)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    let bytes = std::fs::metadata(&args.out).map(|m| m.len()).unwrap_or(0);
+    println!(
+        "wrote {} ({:.0} s, {} participants walking together, {} bystanders{})",
+        args.out.display(),
+        args.seconds,
+        args.participants,
+        args.bystanders,
         if args.folder { String::new() } else { format!(", {:.1} MB", bytes as f64 / 1e6) }
     );
     Ok(())

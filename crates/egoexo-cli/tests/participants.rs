@@ -1,0 +1,67 @@
+//! Captures of several participants through the CLI: `walk --participants` writes one (format
+//! version 3, every camera's people without identity, bystanders among them); `inspect` lists
+//! who is in it; `reconstruct` associates the people and writes one motion per participant,
+//! each scored against the capture's ground truth; bad requests get a reason.
+
+mod common;
+
+use std::path::Path;
+
+use common::egoexo;
+
+fn run(args: &[&str]) -> (String, String) {
+    let out = egoexo(args);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "egoexo {args:?} failed:\n{stderr}");
+    (String::from_utf8_lossy(&out.stdout).into_owned(), stderr)
+}
+
+#[test]
+fn a_capture_of_two_participants_reconstructs_both() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("participants");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let s = |p: &Path| p.display().to_string();
+    let capture = dir.join("pair.egoexo");
+    run(&["walk", "--seconds", "8", "--participants", "2", "--bystanders", "3", "--seed", "5", "-o", &s(&capture)]);
+
+    let (text, _) = run(&["inspect", &s(&capture)]);
+    assert!(text.contains("(2 participants)") && text.contains("participant participant-2: reconstructed"), "{text}");
+    assert!(text.contains("people without identity"), "{text}");
+    let (json, _) = run(&["inspect", &s(&capture), "--json"]);
+    let summary: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(summary["participants"].as_array().unwrap().len(), 2);
+    assert_eq!(summary["sessions"].as_array().unwrap().len(), 2);
+
+    let output = dir.join("pair.json");
+    let (stdout, stderr) = run(&["reconstruct", &s(&capture), "-o", &s(&output)]);
+    for (id, other) in [("participant-1", "participant-2"), ("participant-2", "participant-1")] {
+        assert!(
+            stderr.contains(&format!("associated {id}'s camera")) && stderr.contains(&format!("to {other}")),
+            "{stderr}"
+        );
+        let file = dir.join(format!("pair.{id}.json"));
+        let recon: serde_json::Value = serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap();
+        assert_eq!(recon["joints"].as_array().unwrap().len(), 240, "{}", file.display());
+        let line = stdout.lines().find(|l| l.contains(&format!("participant {id}"))).unwrap();
+        assert!(line.contains("ego-exo") && line.contains("from 1 observers"), "{line}");
+        let mpjpe: f64 = line.rsplit("MPJPE ").next().unwrap().split(' ').next().unwrap().parse().unwrap();
+        assert!(mpjpe < 12.0, "{id}: MPJPE {mpjpe} cm");
+    }
+    assert!(stderr.contains("matched nobody (bystanders)"), "{stderr}");
+
+    // Ego-only, the outputs exist now, keypoint files, video.
+    let out = egoexo(&["reconstruct", &s(&capture), "-o", &s(&output)]);
+    assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("pass --force"));
+    let (stdout, _) = run(&["reconstruct", &s(&capture), "-o", &s(&dir.join("ego.npz")), "--ego-only"]);
+    assert_eq!(stdout.matches("ego-only").count(), 2, "{stdout}");
+    assert!(dir.join("ego.participant-2.npz").exists());
+    let keypoints = dir.join("k.jsonl");
+    std::fs::write(&keypoints, "").unwrap();
+    let spec = format!("participant-1={}", s(&keypoints));
+    let out = egoexo(&["reconstruct", &s(&capture), "-o", &s(&dir.join("k.npz")), "--keypoints", &spec]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("a capture of 2 participants"), "{out:?}");
+    let out =
+        egoexo(&["walk", "--seconds", "2", "--participants", "2", "--video", "256", "-o", &s(&dir.join("v.egoexo"))]);
+    assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("--video"));
+}

@@ -20,7 +20,15 @@ pub const LAYERS: &[(&str, &[&str])] = &[
     ("egoexo-detect", &["egoexo-core", "egoexo-session", "egoexo-infer", "egoexo-video"]),
     (
         "egoexo-dataset",
-        &["egoexo-core", "egoexo-motion-io", "egoexo-session", "egoexo-mocap", "egoexo-synth", "egoexo-infer"],
+        &[
+            "egoexo-core",
+            "egoexo-motion-io",
+            "egoexo-session",
+            "egoexo-mocap",
+            "egoexo-synth",
+            "egoexo-infer",
+            "egoexo-detect",
+        ],
     ),
     (
         "egoexo-web-worker",

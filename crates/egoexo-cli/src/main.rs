@@ -32,6 +32,9 @@ enum Command {
     /// Score reconstruction methods on simulated sessions of `--subjects` with the paper's metrics
     /// (the nearest-neighbour baseline looks up poses among the library's other subjects).
     Eval(commands::eval::Args),
+    /// Score captures of several participants on simulated group scenes: association of the
+    /// cameras' people (bystanders among them) and each participant's MPJPE.
+    EvalGroup(commands::eval_group::Args),
     /// Detect the wearer's 2D keypoints in the observers' videos (inside EgoNet's regions) and
     /// write the session with them.
     Keypoints(commands::keypoints::Args),
@@ -58,6 +61,7 @@ fn main() -> std::process::ExitCode {
         Command::Synth(args) => commands::synth::run(args),
         Command::Walk(args) => commands::walk::run(args),
         Command::Eval(args) => commands::eval::run(args),
+        Command::EvalGroup(args) => commands::eval_group::run(args),
         Command::Keypoints(args) => commands::keypoints::run(args),
         Command::DetectorEval(args) => commands::detector_eval::run(args),
         Command::Reconstruct(args) => commands::reconstruct::run(args),

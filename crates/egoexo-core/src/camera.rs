@@ -390,11 +390,20 @@ impl CameraCalibration {
 
     /// Whether a pixel lies on the image and inside the valid radius.
     pub fn is_valid_pixel(&self, pixel: Vec2) -> bool {
-        let inside = pixel.x >= -0.5
-            && pixel.y >= -0.5
-            && pixel.x <= self.width as f32 - 0.5
-            && pixel.y <= self.height as f32 - 0.5;
-        let in_circle = self.valid_radius_px.is_none_or(|r| pixel.distance(self.projection.principal_point()) <= r);
+        self.is_near_valid_pixel(pixel, 0.0)
+    }
+
+    /// Whether `pixel` lies within `margin_px` pixels of the valid region (the image, and the
+    /// valid radius when there is one): where a projection is still meaningful as a guess of
+    /// where something just out of view is.
+    pub fn is_near_valid_pixel(&self, pixel: Vec2, margin_px: f32) -> bool {
+        let lo = -0.5 - margin_px;
+        let inside = pixel.x >= lo
+            && pixel.y >= lo
+            && pixel.x <= self.width as f32 - 0.5 + margin_px
+            && pixel.y <= self.height as f32 - 0.5 + margin_px;
+        let in_circle =
+            self.valid_radius_px.is_none_or(|r| pixel.distance(self.projection.principal_point()) <= r + margin_px);
         inside && in_circle
     }
 

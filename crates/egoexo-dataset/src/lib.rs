@@ -2,12 +2,15 @@
 //!
 //! - [`shards`] — the networks' exact inputs and targets for PyTorch (`egoexo synth --shards`).
 //! - [`eval`] — the paper's metric tables through the reconstruction engine (`egoexo eval`).
+//! - [`group`] — captures of several participants: association error and per-participant
+//!   MPJPE on simulated group scenes (`egoexo eval-group`).
 //!
 //! Both start from the CMU motion library (`egoexo-mocap`), simulate wearers and observers
 //! (`egoexo-synth`), align (`egoexo-session`) and compute every feature with the engine's own
 //! code (`egoexo-infer`), so training, evaluation and the app see identical inputs.
 
 pub mod eval;
+pub mod group;
 pub mod shards;
 
 use thiserror::Error;

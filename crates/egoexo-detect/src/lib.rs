@@ -176,7 +176,8 @@ pub fn plan_observer(
                 Some(f) => {
                     let (camera, pose) = (&aligned_observer.camera, &aligned_observer.head.poses[f]);
                     let region = propose_region(&coarse.joints[f][..NUM_JOINTS], camera, pose, DEFAULT_REGION_MARGIN);
-                    let expected = people::project_coarse(coarse, aligned_observer, f).unwrap_or([None; COCO17_COUNT]);
+                    let expected =
+                        people::project_coarse(coarse, aligned_observer, f, 0.0).unwrap_or([None; COCO17_COUNT]);
                     (region.bbox().and_then(|b| CropWindow::around(&b, MIN_CROP_SIDE_PX)), expected)
                 }
                 None => (None, [None; COCO17_COUNT]),

@@ -30,14 +30,21 @@ pub struct CoarseParticipant<'a> {
     pub coarse: &'a Reconstruction,
 }
 
+/// How far outside an observer image's valid region (a fraction of the image width) a
+/// participant's projected joint still counts for association: a body at the edge of the view
+/// is detected by what is inside while a slightly wrong coarse pose or observer pose puts most
+/// of its projection just outside.
+pub const ASSOCIATION_MARGIN: f32 = 0.15;
+
 /// The COCO-17 keypoints a coarse pose puts in an observer's image at aligned frame `frame`
-/// (the head joint stands in for no COCO point, so the nose stays `None`; keypoints outside
-/// the image's valid region are `None`); `None` when the wearer or the observer is not
-/// tracked at that frame.
+/// (the head joint stands in for no COCO point, so the nose stays `None`; keypoints further
+/// than `margin_px` outside the image's valid region are `None`); `None` when the wearer or
+/// the observer is not tracked at that frame.
 pub fn project_coarse(
     coarse: &Reconstruction,
     observer: &AlignedObserver,
     frame: usize,
+    margin_px: f32,
 ) -> Option<[Option<Vec2>; COCO17_COUNT]> {
     let tracked = coarse.valid.get(frame).copied().unwrap_or(false)
         && observer.head.valid.get(frame).copied().unwrap_or(false)
@@ -49,8 +56,9 @@ pub fn project_coarse(
     let joints: &[_; NUM_JOINTS] = &coarse.joints[frame];
     let mut expected = [None; COCO17_COUNT];
     for k in ExoKeypoint::ALL.into_iter().skip(1) {
-        expected[k.coco17_index()] =
-            camera.project_world(joints[k.smpl_joint().index()], pose).filter(|px| camera.is_valid_pixel(*px));
+        expected[k.coco17_index()] = camera
+            .project_world(joints[k.smpl_joint().index()], pose)
+            .filter(|px| camera.is_near_valid_pixel(*px, margin_px));
     }
     Some(expected)
 }
@@ -117,7 +125,8 @@ pub fn associate_views(
             let expected: Vec<_> = targets
                 .iter()
                 .map(|(c, observer)| {
-                    nearest_frame(c.aligned, time_ns).and_then(|a| project_coarse(c.coarse, observer, a))
+                    let margin = ASSOCIATION_MARGIN * observer.camera.width as f32;
+                    nearest_frame(c.aligned, time_ns).and_then(|a| project_coarse(c.coarse, observer, a, margin))
                 })
                 .collect();
             let assignment = associate(&expected, detections, options);

@@ -5,6 +5,7 @@ pub mod convert;
 pub mod detection;
 pub mod detector_eval;
 pub mod eval;
+pub mod eval_group;
 pub mod inspect;
 pub mod keypoints;
 pub mod live;

@@ -1,0 +1,270 @@
+//! Evaluation of captures of several participants (`egoexo eval-group`): group scenes from
+//! `egoexo_synth::group` (participants who walk together and look at each other, bystanders
+//! crossing), every camera's people without identity. Per scene: how well association assigns
+//! the people to the participants (against the simulator's identities); per participant:
+//! MPJPE ego-only, ego-exo with the associated keypoints, and ego-exo with the true identities
+//! (what perfect association would give).
+
+use egoexo_core::TrackingMode;
+use egoexo_core::aligned::AlignedSession;
+use egoexo_core::association::AssociationOptions;
+use egoexo_core::exo_keypoints::COCO17_COUNT;
+use egoexo_core::metrics::MetricsAccumulator;
+use egoexo_detect::people::{CoarseParticipant, associate_views};
+use egoexo_infer::{Engine, Method, ReconstructOptions, Reconstruction};
+use egoexo_session::capture::{Capture, View, ViewPeople};
+use egoexo_session::model::KeypointTrack;
+use egoexo_session::{AlignOptions, align};
+use egoexo_synth::group::{GroupConfig, SimulatedCapture, group_walk, simulate_group};
+use serde::{Deserialize, Serialize};
+
+use crate::DatasetError;
+
+/// One group scene to simulate and score.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GroupScene {
+    pub participants: usize,
+    pub seconds: f32,
+    pub seed: u64,
+    pub config: GroupConfig,
+}
+
+/// Association against the simulator's identities, over one scene's cameras.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct AssociationRow {
+    pub participants: usize,
+    pub bystanders: usize,
+    pub seed: u64,
+    /// Detections that are participants, and what association made of them.
+    pub participant_detections: usize,
+    pub right: usize,
+    pub wrong_participant: usize,
+    pub missed: usize,
+    /// Detections that are bystanders, and how many were taken for a participant.
+    pub bystander_detections: usize,
+    pub bystanders_taken: usize,
+}
+
+impl AssociationRow {
+    /// (wrong participant + missed + bystanders taken) / all detections.
+    pub fn error_rate(&self) -> f64 {
+        let all = self.participant_detections + self.bystander_detections;
+        (self.wrong_participant + self.missed + self.bystanders_taken) as f64 / all.max(1) as f64
+    }
+}
+
+/// One participant's reconstruction errors, cm.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ParticipantRow {
+    pub participants: usize,
+    pub seed: u64,
+    pub participant: String,
+    pub frames: usize,
+    pub ego_only_mpjpe_cm: f64,
+    pub ego_exo_mpjpe_cm: f64,
+    pub true_identities_mpjpe_cm: f64,
+    /// Frames where an observer's ray passed the gate.
+    pub exo_evidence_frames: usize,
+}
+
+/// Everything `evaluate_group` measured.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct GroupReport {
+    pub association: Vec<AssociationRow>,
+    pub participants: Vec<ParticipantRow>,
+}
+
+/// The capture with every view assigned by the simulator's own identities (perfect
+/// association).
+pub fn with_true_identities(sim: &SimulatedCapture) -> Capture {
+    let mut capture = sim.capture.clone();
+    let mut views = Vec::new();
+    for (view, identities) in sim.capture.views.iter().zip(&sim.identities) {
+        let ViewPeople::Unassigned(people) = &view.people else {
+            views.push(view.clone());
+            continue;
+        };
+        for (q, participant) in sim.capture.participants.iter().enumerate() {
+            if participant.id == view.observer {
+                continue;
+            }
+            let frames = people
+                .frames
+                .iter()
+                .zip(identities)
+                .map(|(detections, who)| {
+                    who.iter().position(|w| *w == Some(q)).map_or([None; COCO17_COUNT], |d| detections[d])
+                })
+                .collect();
+            views.push(View {
+                observer: view.observer.clone(),
+                people: ViewPeople::Assigned {
+                    target: participant.id.clone(),
+                    keypoints: KeypointTrack { timestamps_ns: people.timestamps_ns.clone(), frames },
+                },
+            });
+        }
+    }
+    capture.views = views;
+    capture
+}
+
+fn aligned_session(capture: &Capture, participant: usize) -> Result<AlignedSession, DatasetError> {
+    let session = capture.session_for(participant).map_err(|e| DatasetError::Simulate(e.to_string()))?;
+    align(&session, &AlignOptions::default()).map_err(|e| DatasetError::Simulate(e.to_string()))
+}
+
+fn reconstruct(engine: &Engine, aligned: &AlignedSession, method: Method) -> Result<Reconstruction, DatasetError> {
+    engine
+        .reconstruct(aligned, &ReconstructOptions { method, ..ReconstructOptions::default() }, &mut |_| true)
+        .map_err(|e| DatasetError::Reconstruct { method: method.to_string(), message: e.to_string() })
+}
+
+fn mpjpe_cm(aligned: &AlignedSession, r: &Reconstruction) -> Result<f64, DatasetError> {
+    let gt = aligned.ground_truth.as_ref().ok_or(DatasetError::NoGroundTruth)?;
+    let want: Vec<_> = gt.poses.iter().map(|p| aligned.skeleton.forward_kinematics(p).positions).collect();
+    let mut metrics = MetricsAccumulator::new();
+    metrics.add_segment(&r.joints, &want, aligned.timeline.fps, Some(&gt.valid))?;
+    metrics.finish().map(|m| m.mpjpe_cm).ok_or(DatasetError::NoGroundTruth)
+}
+
+/// Simulates and scores `scenes` with `engine` (models for the scenes' tracking mode);
+/// `progress(done, total)` after each scene.
+pub fn evaluate_group(
+    engine: &Engine,
+    scenes: &[GroupScene],
+    options: &AssociationOptions,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<GroupReport, DatasetError> {
+    let mut report = GroupReport::default();
+    for (done, scene) in scenes.iter().enumerate() {
+        if scene.participants < 2 {
+            return Err(DatasetError::Options(format!(
+                "a group scene needs 2 or more participants, not {}",
+                scene.participants
+            )));
+        }
+        let name = format!("group-{}-{}", scene.participants, scene.seed);
+        let sim = simulate_group(&group_walk(scene.participants, scene.seconds), &name, &scene.config, scene.seed)
+            .map_err(|e| DatasetError::Simulate(e.to_string()))?;
+        let n = sim.capture.participants.len();
+
+        // EgoNet per participant from their own devices, then association.
+        let aligned: Vec<_> = (0..n).map(|p| aligned_session(&sim.capture, p)).collect::<Result<_, _>>()?;
+        let coarse: Vec<_> =
+            aligned.iter().map(|a| reconstruct(engine, a, Method::EgoNet)).collect::<Result<_, _>>()?;
+        let participants: Vec<_> =
+            (0..n).map(|p| CoarseParticipant { participant: p, aligned: &aligned[p], coarse: &coarse[p] }).collect();
+        let mut capture = sim.capture.clone();
+        let views = associate_views(&mut capture, &participants, options);
+
+        let mut row = AssociationRow {
+            participants: n,
+            bystanders: scene.config.bystanders,
+            seed: scene.seed,
+            ..AssociationRow::default()
+        };
+        for (view, truth) in views.iter().zip(&sim.identities) {
+            for (assigned, who) in view.assignment.iter().zip(truth) {
+                for (a, w) in assigned.iter().zip(who) {
+                    match (w, a) {
+                        (Some(w), Some(a)) if w == a => row.right += 1,
+                        (Some(_), Some(_)) => row.wrong_participant += 1,
+                        (Some(_), None) => row.missed += 1,
+                        (None, Some(_)) => row.bystanders_taken += 1,
+                        (None, None) => {}
+                    }
+                    if w.is_some() {
+                        row.participant_detections += 1;
+                    } else {
+                        row.bystander_detections += 1;
+                    }
+                }
+            }
+        }
+        report.association.push(row);
+
+        // Each participant: ego-only, with the associated keypoints, with the true identities.
+        let truth = with_true_identities(&sim);
+        for p in 0..n {
+            let ego_only = reconstruct(engine, &aligned[p], Method::EgoOnly)?;
+            let associated = aligned_session(&capture, p)?;
+            let ego_exo = reconstruct(engine, &associated, Method::EgoExo)?;
+            let ideal = aligned_session(&truth, p)?;
+            let ideal_recon = reconstruct(engine, &ideal, Method::EgoExo)?;
+            report.participants.push(ParticipantRow {
+                participants: n,
+                seed: scene.seed,
+                participant: capture.participants[p].id.clone(),
+                frames: associated.timeline.frames,
+                ego_only_mpjpe_cm: mpjpe_cm(&aligned[p], &ego_only)?,
+                ego_exo_mpjpe_cm: mpjpe_cm(&associated, &ego_exo)?,
+                true_identities_mpjpe_cm: mpjpe_cm(&ideal, &ideal_recon)?,
+                exo_evidence_frames: ego_exo.exo_evidence.iter().filter(|&&e| e).count(),
+            });
+        }
+        progress(done + 1, scenes.len());
+    }
+    Ok(report)
+}
+
+/// The two tables: association per scene, MPJPE per participant (plus the mean per method).
+pub fn format_group_table(report: &GroupReport) -> String {
+    let mut out = String::from(
+        "| participants | bystanders | seed | participant detections | right | wrong participant | missed | bystander detections | taken for a participant | association error rate |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    for r in &report.association {
+        out += &format!(
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.3} |\n",
+            r.participants,
+            r.bystanders,
+            r.seed,
+            r.participant_detections,
+            r.right,
+            r.wrong_participant,
+            r.missed,
+            r.bystander_detections,
+            r.bystanders_taken,
+            r.error_rate()
+        );
+    }
+    out += "\n| participants | seed | participant | frames | MPJPE ego-only (cm) | ego-exo, associated | ego-exo, true identities | frames with exo evidence |\n|---:|---:|---|---:|---:|---:|---:|---:|\n";
+    for r in &report.participants {
+        out += &format!(
+            "| {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {} |\n",
+            r.participants,
+            r.seed,
+            r.participant,
+            r.frames,
+            r.ego_only_mpjpe_cm,
+            r.ego_exo_mpjpe_cm,
+            r.true_identities_mpjpe_cm,
+            r.exo_evidence_frames
+        );
+    }
+    let n = report.participants.len().max(1) as f64;
+    let mean = |f: fn(&ParticipantRow) -> f64| report.participants.iter().map(f).sum::<f64>() / n;
+    out += &format!(
+        "| mean | | {} participants | | {:.2} | {:.2} | {:.2} | |\n",
+        report.participants.len(),
+        mean(|r| r.ego_only_mpjpe_cm),
+        mean(|r| r.ego_exo_mpjpe_cm),
+        mean(|r| r.true_identities_mpjpe_cm)
+    );
+    out
+}
+
+/// The default scenes of `egoexo eval-group`: `scenes` seeds each of 2 and 3 participants.
+pub fn default_scenes(scenes: usize, seconds: f32, bystanders: usize, tracking: TrackingMode) -> Vec<GroupScene> {
+    [2, 3]
+        .into_iter()
+        .flat_map(|participants| {
+            (0..scenes as u64).map(move |s| GroupScene {
+                participants,
+                seconds,
+                seed: 1000 * participants as u64 + s,
+                config: GroupConfig { tracking, bystanders, ..GroupConfig::default() },
+            })
+        })
+        .collect()
+}

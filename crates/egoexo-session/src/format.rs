@@ -12,6 +12,10 @@
 //! observers/<id>/context_features.npz           (optional) timestamps_ns (N,), values (N, D)
 //! ground_truth.npz                              (optional) SMPL motion + occlusion labels
 //! ```
+//! A capture of several participants ([`crate::capture::Capture`]) is manifest version 3:
+//! `participants/<id>/…` and `views/<observer>/…` instead of `wearer/` and `observers/`
+//! ([`write_capture_files`], [`read_capture`]; every version reads as a capture).
+//!
 //! Everything is in session conventions: Y-up world, metres, CPF head-device frames,
 //! nanoseconds on one clock. The manifest names every data file, so the layout above is what
 //! the writer produces, not something the reader assumes.

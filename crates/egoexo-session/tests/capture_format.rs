@@ -58,3 +58,61 @@ fn broken_captures_name_the_field_and_what_was_expected() {
     });
     assert!(e.contains("people.jsonl, line 1, field `people`: expected at most 64 people"), "{e}");
 }
+
+/// A people file (everyone a device's camera saw, without identity) from per-frame people.
+fn people_jsonl(
+    observer: &str,
+    people: impl Fn(f64) -> Vec<[Option<egoexo_core::exo_keypoints::Keypoint2d>; 17]>,
+) -> Vec<u8> {
+    let track = egoexo_session::capture::PeopleTrack {
+        timestamps_ns: sample_times(30.0).iter().map(|&t| session_ns(t)).collect(),
+        frames: sample_times(30.0).iter().map(|&t| people(t)).collect(),
+    };
+    egoexo_session::keypoints::write_people_jsonl(observer, &track).into_bytes()
+}
+
+/// A Nymeria sequence whose two pairs of glasses both saw people: the wearer and the observer
+/// become two participants to reconstruct, the wearer's glasses get their RGB camera, and each
+/// camera's people are a view without identity. Without people files it stays one session.
+#[test]
+fn a_nymeria_sequence_with_people_files_is_a_capture_of_two() {
+    use egoexo_session::capture::ViewPeople;
+    use egoexo_session::import::{ImportOptions, detect_source, has_people_files, import_capture};
+
+    let plain = import_capture(&tree("nymeria", nymeria_fixture()), &ImportOptions::default()).unwrap().capture;
+    assert!(plain.is_one_session());
+    assert_eq!(plain.participants.iter().map(|p| p.reconstruct).collect::<Vec<_>>(), [true, false]);
+
+    let mut files = nymeria_fixture();
+    // The observer's camera: the wearer (the fixture's keypoints) and a second person.
+    files.insert(
+        "recording_observer/people.jsonl".into(),
+        people_jsonl("observer", |t| vec![keypoints_at(t, 0), keypoints_at(t + 0.5, 1)]),
+    );
+    // The wearer's camera: one person, or nobody every third frame.
+    files.insert(
+        "recording_head/people.jsonl".into(),
+        people_jsonl(
+            "wearer",
+            |t| if (t * 30.0).round() as i64 % 3 == 0 { Vec::new() } else { vec![keypoints_at(t, 1)] },
+        ),
+    );
+    let tree = tree("nymeria", files);
+    let (source, root) = detect_source(&tree).unwrap();
+    assert!(has_people_files(&root, source));
+    let imported = import_capture(&tree, &ImportOptions::default()).unwrap();
+    let capture = &imported.capture;
+    assert!(!capture.is_one_session());
+    let ids: Vec<_> = capture.participants.iter().map(|p| (p.id.as_str(), p.reconstruct, p.camera.is_some())).collect();
+    assert_eq!(ids, [("wearer", true, true), ("observer", true, true)]);
+    let unassigned: Vec<_> = capture
+        .views
+        .iter()
+        .filter(|v| matches!(v.people, ViewPeople::Unassigned(_)))
+        .map(|v| v.observer.as_str())
+        .collect();
+    assert_eq!(unassigned, ["wearer", "observer"]);
+    // Each participant's session: the other one observes.
+    assert_eq!(capture.session_for(1).unwrap().observers[0].id, "wearer");
+    assert!(capture.session_for(0).unwrap().ground_truth.is_some(), "the wearer keeps Nymeria's body");
+}

@@ -8,8 +8,8 @@ use std::sync::{Arc, Mutex};
 
 use egoexo_session::format::{CAPTURE_FORMAT_VERSION, manifest_version};
 use egoexo_session::import::{
-    ImportOptions, ImportProgress, Imported, ImportedCapture, KeypointFile, SourceKind, detect_source, import_capture,
-    import_path,
+    ImportOptions, ImportProgress, Imported, ImportedCapture, KeypointFile, SourceKind, detect_source,
+    has_people_files, import_capture, import_path,
 };
 use egoexo_session::keypoints::CocoTiming;
 use egoexo_session::vfs::{FileTree, Limits};
@@ -58,12 +58,16 @@ impl SessionInput {
     }
 
     /// The input as a capture of several participants, when it is one (a `.egoexo` of
-    /// version 3 with more than one participant to reconstruct, or people without identity);
-    /// `None` for everything that is one session.
+    /// version 3 with more than one participant to reconstruct or people without identity, or
+    /// a multi-device recording with people files); `None` for everything that is one session.
     pub fn import_several(&self) -> Result<Option<ImportedCapture>> {
         let tree = FileTree::open(&self.session, Limits::default())?;
         let (source, root) = detect_source(&tree)?;
-        if source != SourceKind::Egoexo || manifest_version(&root)? < u64::from(CAPTURE_FORMAT_VERSION) {
+        let several = match source {
+            SourceKind::Egoexo => manifest_version(&root)? >= u64::from(CAPTURE_FORMAT_VERSION),
+            _ => has_people_files(&root, source),
+        };
+        if !several {
             return Ok(None);
         }
         let imported = import_capture(&tree, &self.options.import_options()?)?;

@@ -35,7 +35,7 @@ use egoexo_core::glam::Vec3;
 use egoexo_core::skeleton::DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE;
 
 use super::ImportOptions;
-use crate::aria::calibration::{RGB_LABEL, middle_record_with, read_online_calibration};
+use crate::aria::calibration::{CalibrationRecord, RGB_LABEL, middle_record_with, read_online_calibration};
 use crate::aria::hand_tracking::{
     HAND_TRACKING_DIR, HAND_TRACKING_RESULTS_FILE, HandTracking, Side, WRIST_AND_PALM_FILE, read_hand_tracking,
     t_device_wrist,
@@ -115,6 +115,50 @@ pub fn find_device(dir: &FileTree) -> Result<Option<DeviceFiles>, ImportError> {
     }
 }
 
+/// The RGB camera of a device's online calibrations (the middle record's), mounted on CPF.
+fn rgb_camera(
+    file: &str,
+    records: &[CalibrationRecord],
+    warnings: &mut Vec<ImportWarning>,
+) -> Result<CameraCalibration, ImportError> {
+    let (record, rgb) = middle_record_with(file, records, RGB_LABEL)?;
+    if !rgb.size_from_image_sizes {
+        let c = &rgb.calibration;
+        warnings.push(ImportWarning {
+            file: file.to_owned(),
+            message: format!(
+                "no ImageSizes (an MPS < 1.1 calibration): the RGB camera is taken at the sensor's full {}×{} px; keypoints are read in those pixels unless they show a smaller image",
+                c.width, c.height
+            ),
+        });
+    }
+    let t_device_cpf = record.t_device_cpf();
+    let mut camera = rgb.calibration;
+    camera.t_device_camera = t_device_cpf.inverse() * rgb.calibration.t_device_camera;
+    Ok(camera)
+}
+
+/// The RGB camera of the device folder `dir` (its MPS online calibration alone, without the
+/// trajectory): for a wearer whose glasses also saw the others.
+pub(crate) fn device_rgb_camera(
+    dir: &FileTree,
+    warnings: &mut Vec<ImportWarning>,
+) -> Result<CameraCalibration, ImportError> {
+    let files = find_device(dir)?.ok_or_else(|| {
+        ImportError::missing_file(dir.display_path(TRAJECTORY_FILE), "the device's MPS closed-loop trajectory")
+    })?;
+    let Some(path) = files.calibration else {
+        let slam_dir = files.trajectory.strip_suffix(TRAJECTORY_FILE).unwrap_or_default();
+        return Err(ImportError::missing_file(
+            dir.display_path(&format!("{slam_dir}{CALIBRATION_FILE}")),
+            "the device's MPS online_calibration.jsonl (its RGB camera calibration)",
+        ));
+    };
+    let file = dir.display_path(&path);
+    let records = read_online_calibration(&file, &dir.read_text(&path)?)?;
+    rgb_camera(&file, &records, warnings)
+}
+
 /// What a device is worn as.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum DeviceRole {
@@ -175,21 +219,7 @@ pub(crate) fn load_device(
         (Some(records), _) => {
             let middle = &records[records.len() / 2];
             let camera = if role == DeviceRole::Observer {
-                let (record, rgb) = middle_record_with(&calibration_name(), records, RGB_LABEL)?;
-                if !rgb.size_from_image_sizes {
-                    let c = &rgb.calibration;
-                    warnings.push(ImportWarning {
-                        file: calibration_name(),
-                        message: format!(
-                            "no ImageSizes (an MPS < 1.1 calibration): the RGB camera is taken at the sensor's full {}×{} px; keypoints are read in those pixels unless they show a smaller image",
-                            c.width, c.height
-                        ),
-                    });
-                }
-                let t_device_cpf = record.t_device_cpf();
-                let mut camera = rgb.calibration;
-                camera.t_device_camera = t_device_cpf.inverse() * rgb.calibration.t_device_camera;
-                Some(camera)
+                Some(rgb_camera(&calibration_name(), records, warnings)?)
             } else {
                 None
             };

@@ -16,7 +16,7 @@ pub mod aria_mps;
 pub mod nymeria;
 
 use crate::aria::trajectory::Clock;
-use crate::capture::Capture;
+use crate::capture::{Capture, View, ViewPeople};
 use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
 use crate::format::CAPTURE_FORMAT_VERSION;
 use crate::keypoints::{CocoTiming, read_keypoints};
@@ -180,7 +180,9 @@ pub struct ImportedCapture {
 
 /// Recognises and imports the input as a capture: a `.egoexo` of version 3 as written (every
 /// participant to reconstruct checked as a session), anything else through
-/// [`import_session`] as one wearer and their observers ([`Capture::from_session`]).
+/// [`import_session`] as one wearer and their observers ([`Capture::from_session`]) — and, for
+/// multi-device recordings (Nymeria, the Aria layout) whose device folders have people files
+/// ([`PEOPLE_FILE`]), with every device's wearer a participant to reconstruct.
 /// Keypoint files attach to one-wearer sessions only (a capture's views are in its manifest).
 pub fn import_capture(tree: &FileTree, options: &ImportOptions) -> Result<ImportedCapture, ImportError> {
     let (source, root) = detect_source(tree)?;
@@ -210,7 +212,67 @@ pub fn import_capture(tree: &FileTree, options: &ImportOptions) -> Result<Import
         }
     }
     let imported = import_session(tree, options)?;
-    Ok(ImportedCapture { capture: Capture::from_session(&imported.session), source, warnings: imported.warnings })
+    let mut capture = Capture::from_session(&imported.session);
+    let mut warnings = imported.warnings;
+    add_people_views(&root, source, &mut capture, &mut warnings)?;
+    Ok(ImportedCapture { capture, source, warnings })
+}
+
+/// The file in a device folder of a multi-device recording listing everyone that device's RGB
+/// camera saw, without identity (the people-file format of `.egoexo` version 3).
+pub const PEOPLE_FILE: &str = "people.jsonl";
+
+/// The device folders of a multi-device recording, wearer first then each observer:
+/// `(participant id, folder)`.
+fn device_dirs(root: &FileTree, source: SourceKind) -> Vec<(String, String)> {
+    match source {
+        SourceKind::Nymeria => vec![
+            (crate::capture::WEARER_ID.to_owned(), "recording_head".to_owned()),
+            (nymeria::OBSERVER_ID.to_owned(), "recording_observer".to_owned()),
+        ],
+        SourceKind::AriaMultiDevice => std::iter::once((crate::capture::WEARER_ID.to_owned(), "wearer".to_owned()))
+            .chain(root.subdirs("observers").into_iter().map(|id| (id.clone(), format!("observers/{id}"))))
+            .collect(),
+        SourceKind::Egoexo | SourceKind::AriaSingleDevice => Vec::new(),
+    }
+}
+
+/// Whether the recording at `root` has people files ([`PEOPLE_FILE`]): then it is a capture
+/// of several participants ([`import_capture`]).
+pub fn has_people_files(root: &FileTree, source: SourceKind) -> bool {
+    device_dirs(root, source).iter().any(|(_, dir)| root.contains(&format!("{dir}/{PEOPLE_FILE}")))
+}
+
+/// Every device folder's people file becomes a view of that participant's camera (the
+/// wearer's glasses get their RGB camera from their calibration); with any, every participant
+/// is reconstructed — the Nymeria observer, the layout's observers — each by their own glasses
+/// and the others' cameras.
+fn add_people_views(
+    root: &FileTree,
+    source: SourceKind,
+    capture: &mut Capture,
+    warnings: &mut Vec<ImportWarning>,
+) -> Result<(), ImportError> {
+    let mut found = false;
+    for (id, dir) in device_dirs(root, source) {
+        let file = format!("{dir}/{PEOPLE_FILE}");
+        if !root.contains(&file) {
+            continue;
+        }
+        let Some(p) = capture.participants.iter().position(|p| p.id == id) else { continue };
+        let people = crate::keypoints::read_people_jsonl(&root.display_path(&file), &root.read_text(&file)?, &id)?;
+        if capture.participants[p].camera.is_none() {
+            capture.participants[p].camera = Some(aria_mps::device_rgb_camera(&root.view(&dir), warnings)?);
+        }
+        capture.views.push(View { observer: id, people: ViewPeople::Unassigned(people) });
+        found = true;
+    }
+    if found {
+        for p in &mut capture.participants {
+            p.reconstruct = true;
+        }
+    }
+    Ok(())
 }
 
 #[cfg(not(target_arch = "wasm32"))]

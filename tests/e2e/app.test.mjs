@@ -11,6 +11,8 @@ import { after, before, describe, test } from 'node:test';
 import { OUT, decodePng, launch, openApp, savePng, skeletonPixels } from './browser.mjs';
 
 const REPO = new URL('../../', import.meta.url).pathname;
+// The CLI the tests make sessions with (the same build as the server's).
+const BIN = process.env.EGOEXO_BIN ?? join(REPO, 'target/debug/egoexo');
 // The tests' Python (PyAV decodes the video export); `cargo xtask test` sets it.
 const PYTHON = process.env.EGOEXO_PYTHON;
 const SAMPLES = JSON.parse(readFileSync(join(REPO, 'public/samples/samples.json'), 'utf8'));
@@ -350,6 +352,15 @@ describe('bad input and failures', () => {
       assert.equal(await app.waitState(['error', 'ready']), 'error');
       assert.match(await app.text('#error-message'), /^notes\.txt: not a readable zip archive/);
 
+      // A capture of several participants (format version 3) is the CLI's for now: the page
+      // says so instead of showing one of them.
+      const group = join(OUT, 'group.egoexo');
+      execFileSync(BIN, ['walk', '--seconds', '4', '--participants', '2', '-o', group], { stdio: ['ignore', 'ignore', 'inherit'] });
+      await app.page.click('#error-dismiss');
+      await app.page.setInputFiles('#file-input', group);
+      assert.equal(await app.waitState(['error', 'ready']), 'error');
+      assert.match(await app.text('#error-message'), /exactly one participant to reconstruct .*2 participants to reconstruct/);
+
       // Not frozen, not blank: the controls answer and the canvas is still there.
       assert.equal(await app.page.locator('#sample-button').isEnabled(), true);
       assert.equal(await app.page.locator('#view').isVisible(), true);
@@ -581,7 +592,6 @@ describe('observer video: the detector step in the worker', () => {
   // A simulated walk whose two observers bring only H.264 video (the wearer rendered through
   // each camera) and no keypoints, made by the CLI; the CLI's own detector step (OpenH264,
   // resample_rgb) on the same file is the reference for the page's (WebCodecs, canvas crop).
-  const BIN = process.env.EGOEXO_BIN ?? join(REPO, 'target/debug/egoexo');
   test('a session with observer video and no keypoints reconstructs with its observers, detected in the worker', async () => {
     const session = join(OUT, 'walk-video.egoexo');
     const byCli = join(OUT, 'walk-video-cli.egoexo');

@@ -65,3 +65,49 @@ fn a_capture_of_two_participants_reconstructs_both() {
         egoexo(&["walk", "--seconds", "2", "--participants", "2", "--video", "256", "-o", &s(&dir.join("v.egoexo"))]);
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("--video"));
 }
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), target).unwrap();
+        }
+    }
+}
+
+/// The Nymeria-shaped fixture with people files (the observer's camera sees the wearer and a
+/// bystander; the wearer's camera sees the observer): both people are reconstructed, the
+/// wearer against Nymeria's body, the observer from their glasses and the wearer's view.
+#[test]
+fn a_nymeria_sequence_with_two_participants_reconstructs_both() {
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("../egoexo-session/tests/fixtures");
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("nymeria-two");
+    let _ = std::fs::remove_dir_all(&dir);
+    let sequence = dir.join("sequence");
+    copy_dir(&fixtures.join("nymeria"), &sequence);
+    copy_dir(&fixtures.join("nymeria_people"), &sequence);
+    let s = |p: &Path| p.display().to_string();
+
+    let (text, _) = run(&["inspect", &s(&sequence)]);
+    assert!(text.contains("participant observer: reconstructed, RGB camera"), "{text}");
+    let output = dir.join("motion.npz");
+    let (stdout, stderr) = run(&["reconstruct", &s(&sequence), "-o", &s(&output)]);
+    assert!(stderr.contains("associated observer's camera") && stderr.contains("61 to wearer"), "{stderr}");
+    let seen: usize = stderr
+        .split("associated wearer's camera: ")
+        .nth(1)
+        .and_then(|rest| rest.split(" to observer").next())
+        .and_then(|s| s.rsplit(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(0);
+    assert!(seen > 40, "the wearer's camera sees the observer in most frames: {stderr}");
+    let wearer = stdout.lines().find(|l| l.contains("participant wearer")).unwrap();
+    assert!(wearer.contains("ego-exo, 3-point") && wearer.contains("MPJPE"), "{wearer}");
+    let observer = stdout.lines().find(|l| l.contains("participant observer")).unwrap();
+    assert!(observer.contains("ego-exo, 1-point"), "{observer}");
+    assert!(dir.join("motion.wearer.npz").exists() && dir.join("motion.observer.npz").exists());
+}

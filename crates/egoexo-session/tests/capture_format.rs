@@ -59,18 +59,6 @@ fn broken_captures_name_the_field_and_what_was_expected() {
     assert!(e.contains("people.jsonl, line 1, field `people`: expected at most 64 people"), "{e}");
 }
 
-/// A people file (everyone a device's camera saw, without identity) from per-frame people.
-fn people_jsonl(
-    observer: &str,
-    people: impl Fn(f64) -> Vec<[Option<egoexo_core::exo_keypoints::Keypoint2d>; 17]>,
-) -> Vec<u8> {
-    let track = egoexo_session::capture::PeopleTrack {
-        timestamps_ns: sample_times(30.0).iter().map(|&t| session_ns(t)).collect(),
-        frames: sample_times(30.0).iter().map(|&t| people(t)).collect(),
-    };
-    egoexo_session::keypoints::write_people_jsonl(observer, &track).into_bytes()
-}
-
 /// A Nymeria sequence whose two pairs of glasses both saw people: the wearer and the observer
 /// become two participants to reconstruct, the wearer's glasses get their RGB camera, and each
 /// camera's people are a view without identity. Without people files it stays one session.
@@ -87,7 +75,7 @@ fn a_nymeria_sequence_with_people_files_is_a_capture_of_two() {
     // The observer's camera: the wearer (the fixture's keypoints) and a second person.
     files.insert(
         "recording_observer/people.jsonl".into(),
-        people_jsonl("observer", |t| vec![keypoints_at(t, 0), keypoints_at(t + 0.5, 1)]),
+        people_jsonl("observer", |t| vec![keypoints_at(t, 0), keypoints_at(t + 0.5, 1)]).into_bytes(),
     );
     // The wearer's camera: one person, or nobody every third frame.
     files.insert(
@@ -95,7 +83,8 @@ fn a_nymeria_sequence_with_people_files_is_a_capture_of_two() {
         people_jsonl(
             "wearer",
             |t| if (t * 30.0).round() as i64 % 3 == 0 { Vec::new() } else { vec![keypoints_at(t, 1)] },
-        ),
+        )
+        .into_bytes(),
     );
     let tree = tree("nymeria", files);
     let (source, root) = detect_source(&tree).unwrap();

@@ -24,6 +24,10 @@ fn read_dir_files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
 fn expected_fixtures() -> Vec<(&'static str, BTreeMap<String, Vec<u8>>)> {
     let mut extra = BTreeMap::new();
     extra.insert("nymeria_observer_keypoints.jsonl".to_owned(), keypoints_jsonl("observer", 0).into_bytes());
+    // Overlaid on `nymeria/`, they make it a capture of two participants (the CLI's test).
+    for (path, bytes) in nymeria_people_files() {
+        extra.insert(format!("nymeria_people/{path}"), bytes);
+    }
     vec![("aria_mps", aria_fixture()), ("nymeria", nymeria_fixture()), ("extra", extra)]
 }
 

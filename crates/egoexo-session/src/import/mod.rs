@@ -16,6 +16,9 @@ pub mod aria_mps;
 pub mod nymeria;
 
 use crate::aria::trajectory::Clock;
+use egoexo_core::camera::CameraCalibration;
+use egoexo_core::glam::Vec2;
+
 use crate::capture::{Capture, View, ViewPeople};
 use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
 use crate::format::CAPTURE_FORMAT_VERSION;
@@ -262,7 +265,10 @@ fn add_people_views(
         let Some(p) = capture.participants.iter().position(|p| p.id == id) else { continue };
         let people = crate::keypoints::read_people_jsonl(&root.display_path(&file), &root.read_text(&file)?, &id)?;
         if capture.participants[p].camera.is_none() {
-            capture.participants[p].camera = Some(aria_mps::device_rgb_camera(&root.view(&dir), warnings)?);
+            let mut camera = aria_mps::device_rgb_camera(&root.view(&dir), warnings)?;
+            let points: Vec<_> = people.frames.iter().flatten().flatten().flatten().map(|k| k.pixel).collect();
+            fit_full_resolution_camera(&mut camera, &id, &points, warnings);
+            capture.participants[p].camera = Some(camera);
         }
         capture.views.push(View { observer: id, people: ViewPeople::Unassigned(people) });
         found = true;
@@ -293,27 +299,38 @@ pub const ARIA_RGB_STREAM_PX: u32 = 1408;
 /// inside 1408 × 1408 (at least [`MIN_DETECTIONS_FOR_IMAGE_SIZE`] of them), the camera is
 /// rescaled to 1408 px — with a warning, as it is an inference from the keypoints' extent.
 pub fn fit_full_resolution_cameras_to_keypoints(session: &mut Session, warnings: &mut Vec<ImportWarning>) {
-    let full = crate::aria::calibration::RGB_FULL_RES_PX;
     for observer in &mut session.observers {
         let Some(track) = &observer.keypoints else { continue };
-        if observer.camera.width != full || observer.camera.height != full {
-            continue;
-        }
         let points: Vec<_> = track.frames.iter().flatten().flatten().map(|k| k.pixel).collect();
-        let limit = ARIA_RGB_STREAM_PX as f32 - 0.5;
-        if points.len() < MIN_DETECTIONS_FOR_IMAGE_SIZE || points.iter().any(|p| p.x > limit || p.y > limit) {
-            continue;
-        }
-        if let Ok(camera) = observer.camera.scaled_to(ARIA_RGB_STREAM_PX, ARIA_RGB_STREAM_PX) {
-            warnings.push(ImportWarning {
-                file: format!("observer `{}`", observer.id),
-                message: format!(
-                    "its calibration is at the RGB sensor's full {full} px (no ImageSizes) but all {} keypoints lie within {ARIA_RGB_STREAM_PX} px: they were detected on the {ARIA_RGB_STREAM_PX} px stream, so the camera was rescaled to {ARIA_RGB_STREAM_PX}×{ARIA_RGB_STREAM_PX}",
-                    points.len()
-                ),
-            });
-            observer.camera = camera;
-        }
+        fit_full_resolution_camera(&mut observer.camera, &observer.id, &points, warnings);
+    }
+}
+
+/// [`fit_full_resolution_cameras_to_keypoints`] for one camera of `owner` and the keypoints
+/// detected in its images.
+fn fit_full_resolution_camera(
+    camera: &mut CameraCalibration,
+    owner: &str,
+    points: &[Vec2],
+    warnings: &mut Vec<ImportWarning>,
+) {
+    let full = crate::aria::calibration::RGB_FULL_RES_PX;
+    if camera.width != full || camera.height != full {
+        return;
+    }
+    let limit = ARIA_RGB_STREAM_PX as f32 - 0.5;
+    if points.len() < MIN_DETECTIONS_FOR_IMAGE_SIZE || points.iter().any(|p| p.x > limit || p.y > limit) {
+        return;
+    }
+    if let Ok(scaled) = camera.scaled_to(ARIA_RGB_STREAM_PX, ARIA_RGB_STREAM_PX) {
+        warnings.push(ImportWarning {
+            file: format!("observer `{owner}`"),
+            message: format!(
+                "its calibration is at the RGB sensor's full {full} px (no ImageSizes) but all {} keypoints lie within {ARIA_RGB_STREAM_PX} px: they were detected on the {ARIA_RGB_STREAM_PX} px stream, so the camera was rescaled to {ARIA_RGB_STREAM_PX}×{ARIA_RGB_STREAM_PX}",
+                points.len()
+            ),
+        });
+        *camera = scaled;
     }
 }
 

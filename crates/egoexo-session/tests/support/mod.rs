@@ -113,11 +113,17 @@ pub fn rgb_camera() -> CameraCalibration {
 /// The 17 COCO keypoints observer `k` sees at time `t` (eyes and ears placed around the nose,
 /// with lower scores, as detectors do).
 pub fn keypoints_at(t: f64, k: usize) -> [Option<Keypoint2d>; COCO17_COUNT] {
+    body_keypoints(&body_pose_at(t), &observer_cpf_at(t, k), t)
+}
+
+/// The 17 COCO keypoints of the mean-shape body in `pose` seen by the RGB camera of glasses
+/// at `t_world_device` at time `t` (scores vary with `t`).
+pub fn body_keypoints(pose: &SmplPose, t_world_device: &RigidTransform, t: f64) -> [Option<Keypoint2d>; COCO17_COUNT] {
     let skeleton = SmplSkeleton::mean_shape();
-    let fk = skeleton.forward_kinematics(&body_pose_at(t));
+    let fk = skeleton.forward_kinematics(pose);
     let world = exo_keypoints_from_smpl(&fk.positions, fk.rotations[SmplJoint::Head.index()], 1.0);
     let camera = rgb_camera();
-    let t_world_device = observer_cpf_at(t, k);
+    let t_world_device = *t_world_device;
     let mut out = [None; COCO17_COUNT];
     for kp in ExoKeypoint::ALL {
         if let Some(pixel) = camera.project_world(world[kp.index()], &t_world_device)
@@ -141,6 +147,65 @@ fn round2(p: Vec2) -> Vec2 {
 
 fn round2s(s: f32) -> f32 {
     (s * 1000.0).round() / 1000.0
+}
+
+/// Observer `k`'s own body: standing under their glasses (arms down), facing the wearer's
+/// chest.
+pub fn observer_body_at(t: f64, k: usize) -> SmplPose {
+    let glasses = observer_cpf_at(t, k).translation;
+    let chest = SmplSkeleton::mean_shape().forward_kinematics(&body_pose_at(t)).positions[SmplJoint::Spine3.index()];
+    let to = chest - glasses;
+    let mut body = [Quat::IDENTITY; 21];
+    body[SmplJoint::LeftShoulder.index() - 1] = Quat::from_rotation_z(-1.25);
+    body[SmplJoint::RightShoulder.index() - 1] = Quat::from_rotation_z(1.25);
+    let skeleton = SmplSkeleton::mean_shape();
+    let pelvis = Vec3::new(glasses.x, glasses.y - 0.68, glasses.z);
+    SmplPose {
+        root_orientation: Quat::from_rotation_y(to.x.atan2(to.z)),
+        body,
+        translation: pelvis - skeleton.rest_joints()[0],
+    }
+}
+
+/// A people file (`.egoexo` version 3's format) of `people(t)` at [`FRAME_HZ`].
+pub fn people_jsonl(observer: &str, people: impl Fn(f64) -> Vec<[Option<Keypoint2d>; COCO17_COUNT]>) -> String {
+    let times = sample_times(FRAME_HZ);
+    let track = egoexo_session::capture::PeopleTrack {
+        timestamps_ns: times.iter().map(|&t| START_NS + (t * 1e9).round() as i64).collect(),
+        frames: times
+            .iter()
+            .map(|&t| people(t).into_iter().filter(|p| p.iter().any(Option::is_some)).collect())
+            .collect(),
+    };
+    egoexo_session::keypoints::write_people_jsonl(observer, &track)
+}
+
+/// People files that make the Nymeria fixture a capture of two participants: the observer's
+/// camera sees the wearer and a bystander standing by; the wearer's camera sees the observer
+/// (when they face them).
+pub fn nymeria_people_files() -> BTreeMap<String, Vec<u8>> {
+    let bystander = |t: f64| {
+        let skeleton = SmplSkeleton::mean_shape();
+        let mut body = [Quat::IDENTITY; 21];
+        body[SmplJoint::LeftShoulder.index() - 1] = Quat::from_rotation_z(-1.25);
+        body[SmplJoint::RightShoulder.index() - 1] = Quat::from_rotation_z(1.25);
+        let pose = SmplPose {
+            root_orientation: Quat::from_rotation_y(2.5),
+            body,
+            translation: Vec3::new(-1.6, 0.97, 2.2) - skeleton.rest_joints()[0],
+        };
+        body_keypoints(&pose, &observer_cpf_at(t, 0), t)
+    };
+    let mut files = BTreeMap::new();
+    files.insert(
+        "recording_observer/people.jsonl".to_owned(),
+        people_jsonl("observer", |t| vec![bystander(t), keypoints_at(t, 0)]).into_bytes(),
+    );
+    files.insert(
+        "recording_head/people.jsonl".to_owned(),
+        people_jsonl("wearer", |t| vec![body_keypoints(&observer_body_at(t, 0), &head_cpf_at(t), t)]).into_bytes(),
+    );
+    files
 }
 
 /// Truth: the wearer's motion at [`FRAME_HZ`] on the session clock.

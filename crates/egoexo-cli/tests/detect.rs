@@ -8,14 +8,7 @@ mod common;
 
 use std::path::Path;
 
-use common::egoexo;
-
-fn run(args: &[&str]) -> (String, String) {
-    let out = egoexo(args);
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(out.status.success(), "egoexo {args:?} failed:\n{stderr}");
-    (String::from_utf8_lossy(&out.stdout).into_owned(), stderr)
-}
+use common::{egoexo, run};
 
 #[test]
 fn observers_with_video_get_keypoints_and_help_the_reconstruction() {

@@ -7,14 +7,7 @@ mod common;
 
 use std::path::Path;
 
-use common::egoexo;
-
-fn run(args: &[&str]) -> (String, String) {
-    let out = egoexo(args);
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(out.status.success(), "egoexo {args:?} failed:\n{stderr}");
-    (String::from_utf8_lossy(&out.stdout).into_owned(), stderr)
-}
+use common::{copy_dir, egoexo, run};
 
 #[test]
 fn a_capture_of_two_participants_reconstructs_both() {
@@ -64,19 +57,6 @@ fn a_capture_of_two_participants_reconstructs_both() {
     let out =
         egoexo(&["walk", "--seconds", "2", "--participants", "2", "--video", "256", "-o", &s(&dir.join("v.egoexo"))]);
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("--video"));
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for entry in std::fs::read_dir(from).unwrap() {
-        let entry = entry.unwrap();
-        let target = to.join(entry.file_name());
-        if entry.file_type().unwrap().is_dir() {
-            copy_dir(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), target).unwrap();
-        }
-    }
 }
 
 /// The Nymeria-shaped fixture with people files (the observer's camera sees the wearer and a

@@ -97,9 +97,16 @@ pub fn read_keypoints(
     }
 }
 
-/// Reads the JSON-lines form (see the module docs).
-pub fn read_keypoints_jsonl(file: &str, text: &str, observer_id: &str) -> Result<KeypointTrack, ImportError> {
-    let mut track = KeypointTrack::default();
+/// Walks a JSON-lines file of one camera's frames (keypoints or people): every non-blank line
+/// parsed, its optional `observer` checked against `observer_id`, its `timestamp_ns` checked
+/// to increase strictly; `record(ctx, line, timestamp)` reads the rest.
+fn read_timed_lines(
+    file: &str,
+    text: &str,
+    observer_id: &str,
+    mut record: impl FnMut(&JsonCtx<'_>, &Value, i64) -> Result<(), ImportError>,
+) -> Result<(), ImportError> {
+    let mut previous = None;
     for (i, line) in text.lines().enumerate() {
         if line.trim().is_empty() {
             continue;
@@ -116,7 +123,7 @@ pub fn read_keypoints_jsonl(file: &str, text: &str, observer_id: &str) -> Result
             }
         }
         let t = ctx.i64(ctx.field(&doc, "", "timestamp_ns")?, "timestamp_ns")?;
-        if let Some(&previous) = track.timestamps_ns.last() {
+        if let Some(previous) = previous {
             if t == previous {
                 return Err(ctx.error("timestamp_ns", ImportErrorKind::DuplicateTimestamp(t)));
             }
@@ -124,10 +131,21 @@ pub fn read_keypoints_jsonl(file: &str, text: &str, observer_id: &str) -> Result
                 return Err(ctx.error("timestamp_ns", ImportErrorKind::NonMonotonicTimestamp { previous, got: t }));
             }
         }
-        let frame = coco17_frame(&ctx, ctx.field(&doc, "", "keypoints")?, "keypoints")?;
+        previous = Some(t);
+        record(&ctx, &doc, t)?;
+    }
+    Ok(())
+}
+
+/// Reads the JSON-lines form (see the module docs).
+pub fn read_keypoints_jsonl(file: &str, text: &str, observer_id: &str) -> Result<KeypointTrack, ImportError> {
+    let mut track = KeypointTrack::default();
+    read_timed_lines(file, text, observer_id, |ctx, doc, t| {
+        let frame = coco17_frame(ctx, ctx.field(doc, "", "keypoints")?, "keypoints")?;
         track.timestamps_ns.push(t);
         track.frames.push(frame);
-    }
+        Ok(())
+    })?;
     if track.frames.is_empty() {
         return Err(ImportError::new(
             file,
@@ -176,31 +194,8 @@ pub const MAX_PEOPLE_PER_FRAME: usize = 64;
 /// seen) and holds at most [`MAX_PEOPLE_PER_FRAME`].
 pub fn read_people_jsonl(file: &str, text: &str, observer_id: &str) -> Result<PeopleTrack, ImportError> {
     let mut track = PeopleTrack::default();
-    for (i, line) in text.lines().enumerate() {
-        if line.trim().is_empty() {
-            continue;
-        }
-        let ctx = JsonCtx::line(file, i as u64 + 1);
-        let doc = ctx.parse(line)?;
-        if let Some(id) = ctx.optional(&doc, "", "observer")? {
-            let id = ctx.str(id, "observer")?;
-            if id != observer_id {
-                return Err(ctx.error(
-                    "observer",
-                    ImportErrorKind::ObserverMismatch { expected: observer_id.into(), got: id.into() },
-                ));
-            }
-        }
-        let t = ctx.i64(ctx.field(&doc, "", "timestamp_ns")?, "timestamp_ns")?;
-        if let Some(&previous) = track.timestamps_ns.last() {
-            if t == previous {
-                return Err(ctx.error("timestamp_ns", ImportErrorKind::DuplicateTimestamp(t)));
-            }
-            if t < previous {
-                return Err(ctx.error("timestamp_ns", ImportErrorKind::NonMonotonicTimestamp { previous, got: t }));
-            }
-        }
-        let people_value = ctx.field(&doc, "", "people")?;
+    read_timed_lines(file, text, observer_id, |ctx, doc, t| {
+        let people_value = ctx.field(doc, "", "people")?;
         let people = ctx.array(people_value, "people")?;
         if people.len() > MAX_PEOPLE_PER_FRAME {
             return Err(ctx.invalid("people", format!("at most {MAX_PEOPLE_PER_FRAME} people"), people_value));
@@ -208,11 +203,12 @@ pub fn read_people_jsonl(file: &str, text: &str, observer_id: &str) -> Result<Pe
         let frame = people
             .iter()
             .enumerate()
-            .map(|(p, person)| coco17_frame(&ctx, person, &format!("people[{p}]")))
+            .map(|(p, person)| coco17_frame(ctx, person, &format!("people[{p}]")))
             .collect::<Result<Vec<_>, _>>()?;
         track.timestamps_ns.push(t);
         track.frames.push(frame);
-    }
+        Ok(())
+    })?;
     if track.frames.is_empty() {
         return Err(ImportError::new(
             file,

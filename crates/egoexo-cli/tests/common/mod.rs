@@ -10,6 +10,28 @@ pub fn egoexo(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_egoexo")).args(args).output().expect("egoexo runs")
 }
 
+/// Runs `egoexo` and asserts it succeeded: `(stdout, stderr)`.
+pub fn run(args: &[&str]) -> (String, String) {
+    let out = egoexo(args);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "egoexo {args:?} failed:\n{stderr}");
+    (String::from_utf8_lossy(&out.stdout).into_owned(), stderr)
+}
+
+/// Copies the folder `from` to `to`, recursively.
+pub fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), target).unwrap();
+        }
+    }
+}
+
 /// A running `egoexo serve`; killed when dropped.
 pub struct Served {
     pub child: Child,

@@ -101,7 +101,7 @@ pub fn group_walk(n: usize, seconds: f32) -> Vec<SmplMotion> {
         .map(|i| {
             let radius = 1.5 * (i + 1) as f32;
             let head_height = 1.5 + 0.1 * (i % 3) as f32;
-            walking_circle_around(Vec3::ZERO, radius, 0.25, 0.35 * i as f32, head_height, seconds)
+            walking_circle_around(Vec3::ZERO, radius, 0.25 * radius, 0.35 * i as f32, head_height, seconds)
         })
         .collect()
 }

@@ -11,25 +11,25 @@ pub const FPS: f32 = 30.0;
 
 /// `seconds` of walking around a circle of radius 3 m at about 1.1 m/s.
 pub fn walking_circle(seconds: f32) -> SmplMotion {
-    walking_circle_around(Vec3::ZERO, 3.0, 1.1 / 3.0, 0.0, 1.55, seconds)
+    walking_circle_around(Vec3::ZERO, 3.0, 1.1, 0.0, 1.55, seconds)
 }
 
 /// `seconds` of walking around a circle of `radius` (metres) about `centre` (its y ignored:
-/// feet on y = 0) at `angular_speed` (rad/s; negative: clockwise seen from above), starting at
+/// feet on y = 0) at `speed` (m/s along the circle; negative: clockwise seen from above), starting at
 /// angle `phase` (0: at `centre + radius · +Z`), for a person whose head is `head_height` m
 /// above the soles. Legs and arms swing at 0.9 Hz whatever the speed.
 pub fn walking_circle_around(
     centre: Vec3,
     radius: f32,
-    angular_speed: f32,
+    speed: f32,
     phase: f32,
     head_height: f32,
     seconds: f32,
 ) -> SmplMotion {
     let frames = (seconds * FPS) as usize;
-    let turn = if angular_speed < 0.0 { -std::f32::consts::FRAC_PI_2 } else { std::f32::consts::FRAC_PI_2 };
+    let turn = if speed < 0.0 { -std::f32::consts::FRAC_PI_2 } else { std::f32::consts::FRAC_PI_2 };
     walking(head_height, frames, |t| {
-        let angle = phase + t * angular_speed;
+        let angle = phase + t * speed / radius;
         let position = Vec3::new(centre.x + radius * angle.sin(), 0.0, centre.z + radius * angle.cos());
         // Facing the direction of travel (tangent of the circle).
         (position, angle + turn)

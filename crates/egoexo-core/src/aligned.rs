@@ -14,8 +14,9 @@ use crate::camera::CameraCalibration;
 use crate::ego_features::TrackingMode;
 use crate::exo_keypoints::{EXO_KEYPOINT_COUNT, Keypoint2d};
 use crate::glam::Vec3;
+use crate::metrics::MetricsAccumulator;
 use crate::rigid::RigidTransform;
-use crate::skeleton::{SmplPose, SmplSkeleton};
+use crate::skeleton::{NUM_JOINTS, SmplPose, SmplSkeleton};
 
 /// A fixed-rate timeline on the session clock.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -245,5 +246,18 @@ impl AlignedSession {
     /// 3-point mode, may come and go: their per-frame validity reaches the network.)
     pub fn wearer_tracked(&self, frame: usize) -> bool {
         self.head.valid.get(frame).copied().unwrap_or(false)
+    }
+
+    /// MPJPE (cm) of per-frame world joints (metres, on this timeline) against the ground
+    /// truth, over the frames where both the truth and `valid` hold; `None` without ground
+    /// truth or without such frames.
+    pub fn ground_truth_mpjpe_cm(&self, joints: &[[Vec3; NUM_JOINTS]], valid: &[bool]) -> Option<f64> {
+        let gt = self.ground_truth.as_ref()?;
+        let frames = joints.len().min(gt.poses.len()).min(valid.len()).min(gt.valid.len());
+        let truth: Vec<_> = gt.poses[..frames].iter().map(|p| self.skeleton.forward_kinematics(p).positions).collect();
+        let selected: Vec<bool> = (0..frames).map(|f| valid[f] && gt.valid[f]).collect();
+        let mut metrics = MetricsAccumulator::new();
+        metrics.add_segment(&joints[..frames], &truth, self.timeline.fps, Some(&selected)).ok()?;
+        metrics.finish().map(|m| m.mpjpe_cm)
     }
 }

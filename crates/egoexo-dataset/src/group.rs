@@ -9,7 +9,6 @@ use egoexo_core::TrackingMode;
 use egoexo_core::aligned::AlignedSession;
 use egoexo_core::association::AssociationOptions;
 use egoexo_core::exo_keypoints::COCO17_COUNT;
-use egoexo_core::metrics::MetricsAccumulator;
 use egoexo_detect::people::{CoarseParticipant, associate_views};
 use egoexo_infer::{Engine, Method, ReconstructOptions, Reconstruction};
 use egoexo_session::capture::{Capture, View, ViewPeople};
@@ -121,11 +120,7 @@ fn reconstruct(engine: &Engine, aligned: &AlignedSession, method: Method) -> Res
 }
 
 fn mpjpe_cm(aligned: &AlignedSession, r: &Reconstruction) -> Result<f64, DatasetError> {
-    let gt = aligned.ground_truth.as_ref().ok_or(DatasetError::NoGroundTruth)?;
-    let want: Vec<_> = gt.poses.iter().map(|p| aligned.skeleton.forward_kinematics(p).positions).collect();
-    let mut metrics = MetricsAccumulator::new();
-    metrics.add_segment(&r.joints, &want, aligned.timeline.fps, Some(&gt.valid))?;
-    metrics.finish().map(|m| m.mpjpe_cm).ok_or(DatasetError::NoGroundTruth)
+    aligned.ground_truth_mpjpe_cm(&r.joints, &r.valid).ok_or(DatasetError::NoGroundTruth)
 }
 
 /// Simulates and scores `scenes` with `engine` (models for the scenes' tracking mode);

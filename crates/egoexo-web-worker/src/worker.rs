@@ -11,7 +11,6 @@ use std::sync::Arc;
 
 use egoexo_core::aligned::AlignedSession;
 use egoexo_core::camera::Projection;
-use egoexo_core::metrics::MetricsAccumulator;
 use egoexo_core::{SmplMotion, TrackingMode};
 use egoexo_detect::{observers_needing_detection, plan_observer};
 use egoexo_infer::manifest::Manifest;
@@ -945,14 +944,7 @@ fn reconstruction_summary(
     runs: NetworkRuns,
 ) -> ReconstructionSummary {
     let accuracy = aligned.ground_truth.as_ref().and_then(|gt| {
-        let truth: Vec<_> = gt.poses.iter().map(|p| aligned.skeleton.forward_kinematics(p).positions).collect();
-        let mpjpe = |r: &Reconstruction| -> Option<f64> {
-            let frames = r.joints.len().min(truth.len());
-            let selected: Vec<bool> = (0..frames).map(|f| r.valid[f] && gt.valid[f]).collect();
-            let mut acc = MetricsAccumulator::new();
-            acc.add_segment(&r.joints[..frames], &truth[..frames], aligned.timeline.fps, Some(&selected)).ok()?;
-            acc.finish().map(|m| m.mpjpe_cm)
-        };
+        let mpjpe = |r: &Reconstruction| aligned.ground_truth_mpjpe_cm(&r.joints, &r.valid);
         let frames = gt.valid.iter().zip(&ego_exo.valid).filter(|(g, v)| **g && **v).count();
         Some(Accuracy { frames, ego_exo_mpjpe_cm: mpjpe(ego_exo)?, ego_only_mpjpe_cm: ego_only.and_then(mpjpe) })
     });

@@ -12,7 +12,6 @@ use anyhow::{Context, Result};
 use egoexo_core::TrackingMode;
 use egoexo_core::aligned::AlignedSession;
 use egoexo_core::association::AssociationOptions;
-use egoexo_core::metrics::MetricsAccumulator;
 use egoexo_detect::people::{CoarseParticipant, ViewAssociation, associate_views};
 use egoexo_infer::plan::resolve_tracking;
 use egoexo_infer::{Engine, Method, ReconstructOptions, Reconstruction};
@@ -26,12 +25,8 @@ use super::models::{load_model_set, read_manifest};
 
 /// MPJPE (cm) of a participant's reconstruction against the ground truth on its timeline,
 /// when the capture has one.
-pub fn mpjpe_cm(p: &ParticipantReconstruction) -> Result<Option<f64>> {
-    let Some(gt) = &p.aligned.ground_truth else { return Ok(None) };
-    let want: Vec<_> = gt.poses.iter().map(|pose| p.aligned.skeleton.forward_kinematics(pose).positions).collect();
-    let mut metrics = MetricsAccumulator::new();
-    metrics.add_segment(&p.reconstruction.joints, &want, p.aligned.timeline.fps, Some(&gt.valid))?;
-    Ok(metrics.finish().map(|m| m.mpjpe_cm))
+pub fn mpjpe_cm(p: &ParticipantReconstruction) -> Option<f64> {
+    p.aligned.ground_truth_mpjpe_cm(&p.reconstruction.joints, &p.reconstruction.valid)
 }
 
 /// One participant's reconstruction.

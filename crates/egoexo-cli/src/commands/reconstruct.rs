@@ -170,7 +170,7 @@ fn run_capture(args: &Args, imported: ImportedCapture, format: Option<Format>) -
         let recon = &p.reconstruction;
         std::fs::write(output, encode(format, recon)?).with_context(|| format!("cannot write {}", output.display()))?;
         let evidence = recon.exo_evidence.iter().filter(|v| **v).count();
-        let mpjpe = match mpjpe_cm(p)? {
+        let mpjpe = match mpjpe_cm(p) {
             Some(cm) => format!("; MPJPE {cm:.2} cm against the capture's ground truth"),
             None => String::new(),
         };

@@ -89,8 +89,9 @@ pub struct ViewAssociation {
 }
 
 /// Replaces every unassigned view of `capture` by one assigned view per participant that
-/// `coarse` covers (a participant none of whose frames matched gets an empty-handed track:
-/// frames without keypoints); returns what each view's association did, in view order.
+/// `coarse` covers and the camera has no keypoints of yet (a participant none of whose frames
+/// matched gets a track of frames without keypoints); returns what each unassigned view's
+/// association did, in view order.
 pub fn associate_views(
     capture: &mut Capture,
     coarse: &[CoarseParticipant<'_>],
@@ -98,24 +99,29 @@ pub fn associate_views(
 ) -> Vec<ViewAssociation> {
     let mut reports = Vec::new();
     let mut views = Vec::with_capacity(capture.views.len());
+    // (observer, target) pairs the capture already has keypoints for: kept as they are.
+    let assigned: Vec<(String, String)> = capture
+        .views
+        .iter()
+        .filter_map(|v| match &v.people {
+            ViewPeople::Assigned { target, .. } => Some((v.observer.clone(), target.clone())),
+            ViewPeople::Unassigned(_) => None,
+        })
+        .collect();
     for view in std::mem::take(&mut capture.views) {
         let ViewPeople::Unassigned(people) = &view.people else {
             views.push(view);
             continue;
         };
-        // The participants this camera can see: everyone with a coarse pose but its owner,
-        // each with the observer as their session has it.
+        // The participants this camera can see: everyone with a coarse pose whose session has
+        // this camera as an observer (not its owner) and that it has no keypoints of yet.
         let targets: Vec<(&CoarseParticipant<'_>, &AlignedObserver)> = coarse
             .iter()
-            .filter(|c| capture.participants.get(c.participant).is_some_and(|p| p.id != view.observer))
-            .filter_map(|c| {
-                let index = capture
-                    .participants
-                    .iter()
-                    .filter(|p| p.id != capture.participants[c.participant].id && p.camera.is_some())
-                    .position(|p| p.id == view.observer)?;
-                Some((c, c.aligned.observers.get(index)?))
+            .filter(|c| {
+                let id = capture.participants.get(c.participant).map(|p| p.id.as_str());
+                !assigned.iter().any(|(o, t)| *o == view.observer && Some(t.as_str()) == id)
             })
+            .filter_map(|c| Some((c, c.aligned.observers.iter().find(|o| o.id == view.observer)?)))
             .collect();
         let mut tracks: Vec<Vec<[Option<Keypoint2d>; COCO17_COUNT]>> =
             vec![vec![[None; COCO17_COUNT]; people.frames.len()]; targets.len()];

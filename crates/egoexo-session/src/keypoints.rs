@@ -99,11 +99,13 @@ pub fn read_keypoints(
 
 /// Walks a JSON-lines file of one camera's frames (keypoints or people): every non-blank line
 /// parsed, its optional `observer` checked against `observer_id`, its `timestamp_ns` checked
-/// to increase strictly; `record(ctx, line, timestamp)` reads the rest.
+/// to increase strictly; `record(ctx, line, timestamp)` reads the rest. A file without a
+/// record is an error naming `what` it should hold.
 fn read_timed_lines(
     file: &str,
     text: &str,
     observer_id: &str,
+    what: &str,
     mut record: impl FnMut(&JsonCtx<'_>, &Value, i64) -> Result<(), ImportError>,
 ) -> Result<(), ImportError> {
     let mut previous = None;
@@ -134,25 +136,25 @@ fn read_timed_lines(
         previous = Some(t);
         record(&ctx, &doc, t)?;
     }
+    if previous.is_none() {
+        return Err(ImportError::new(
+            file,
+            Location::File,
+            ImportErrorKind::Empty { expected: format!("at least one {what} record (one JSON object per line)") },
+        ));
+    }
     Ok(())
 }
 
 /// Reads the JSON-lines form (see the module docs).
 pub fn read_keypoints_jsonl(file: &str, text: &str, observer_id: &str) -> Result<KeypointTrack, ImportError> {
     let mut track = KeypointTrack::default();
-    read_timed_lines(file, text, observer_id, |ctx, doc, t| {
+    read_timed_lines(file, text, observer_id, "keypoint", |ctx, doc, t| {
         let frame = coco17_frame(ctx, ctx.field(doc, "", "keypoints")?, "keypoints")?;
         track.timestamps_ns.push(t);
         track.frames.push(frame);
         Ok(())
     })?;
-    if track.frames.is_empty() {
-        return Err(ImportError::new(
-            file,
-            Location::File,
-            ImportErrorKind::Empty { expected: "at least one keypoint record (one JSON object per line)".into() },
-        ));
-    }
     Ok(track)
 }
 
@@ -194,7 +196,7 @@ pub const MAX_PEOPLE_PER_FRAME: usize = 64;
 /// seen) and holds at most [`MAX_PEOPLE_PER_FRAME`].
 pub fn read_people_jsonl(file: &str, text: &str, observer_id: &str) -> Result<PeopleTrack, ImportError> {
     let mut track = PeopleTrack::default();
-    read_timed_lines(file, text, observer_id, |ctx, doc, t| {
+    read_timed_lines(file, text, observer_id, "people", |ctx, doc, t| {
         let people_value = ctx.field(doc, "", "people")?;
         let people = ctx.array(people_value, "people")?;
         if people.len() > MAX_PEOPLE_PER_FRAME {
@@ -209,13 +211,6 @@ pub fn read_people_jsonl(file: &str, text: &str, observer_id: &str) -> Result<Pe
         track.frames.push(frame);
         Ok(())
     })?;
-    if track.frames.is_empty() {
-        return Err(ImportError::new(
-            file,
-            Location::File,
-            ImportErrorKind::Empty { expected: "at least one people record (one JSON object per line)".into() },
-        ));
-    }
     Ok(track)
 }
 

@@ -54,6 +54,9 @@ fn a_capture_of_two_participants_reconstructs_both() {
     let spec = format!("participant-1={}", s(&keypoints));
     let out = egoexo(&["reconstruct", &s(&capture), "-o", &s(&dir.join("k.npz")), "--keypoints", &spec]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("a capture of 2 participants"), "{out:?}");
+    let hands = s(&dir.join("h.egoexo"));
+    let out = egoexo(&["walk", "--seconds", "2", "--participants", "2", "--tracking", "3-hand-tracking", "-o", &hands]);
+    assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("wrist devices or none"));
     let out =
         egoexo(&["walk", "--seconds", "2", "--participants", "2", "--video", "256", "-o", &s(&dir.join("v.egoexo"))]);
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("--video"));
@@ -90,4 +93,23 @@ fn a_nymeria_sequence_with_two_participants_reconstructs_both() {
     let observer = stdout.lines().find(|l| l.contains("participant observer")).unwrap();
     assert!(observer.contains("ego-exo, 1-point"), "{observer}");
     assert!(dir.join("motion.wearer.npz").exists() && dir.join("motion.observer.npz").exists());
+}
+
+/// `eval-group` through the CLI: one short scene each of 2 and 3 participants, as JSON.
+#[test]
+fn eval_group_scores_association_and_every_participant() {
+    let (stdout, _) = run(&["eval-group", "--scenes", "1", "--seconds", "6", "--json"]);
+    let report: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    assert_eq!(report["association"].as_array().unwrap().len(), 2, "{report}");
+    let participants = report["participants"].as_array().unwrap();
+    assert_eq!(participants.len(), 5, "2 + 3 participants: {report}");
+    for row in participants {
+        assert!(row["ego_exo_mpjpe_cm"].as_f64().unwrap() > 0.0, "{row}");
+    }
+    let (table, _) = run(&["eval-group", "--scenes", "1", "--seconds", "6"]);
+    assert!(table.contains("| association error rate |") && table.contains("| mean |"), "{table}");
+    let out = egoexo(&["eval-group", "--tracking", "3-hand-tracking"]);
+    assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("wrist devices or none"));
+    let out = egoexo(&["eval-group", "--scenes", "0"]);
+    assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("--scenes 0"));
 }

@@ -51,6 +51,9 @@ pub fn run(args: Args) -> Result<()> {
     if !(args.max_cost > 0.0 && args.max_cost.is_finite()) {
         bail!("--max-cost {}: expected a positive number", args.max_cost);
     }
+    if !matches!(args.tracking.wrists(), egoexo_dataset::shards::WristKind::Devices) {
+        bail!("--tracking: group scenes simulate wrist devices or none; use 1 or 3");
+    }
     let tracking = TrackingMode::from(args.tracking);
     let dir = models_dir(args.models.as_deref());
     let set = load_model_set(&dir, &read_manifest(&dir)?, tracking)?

@@ -100,6 +100,9 @@ fn write_group(args: &Args) -> Result<()> {
     if args.video.is_some() {
         bail!("--video films one wearer for their observers; a capture of several participants has keypoints");
     }
+    if !matches!(args.tracking.wrists(), egoexo_dataset::shards::WristKind::Devices) {
+        bail!("--tracking: a group capture simulates wrist devices or none; use 1 or 3");
+    }
     if args.bystanders > 20 {
         bail!("--bystanders {}: at most 20", args.bystanders);
     }

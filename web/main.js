@@ -3,7 +3,7 @@
 // does every message to and from the worker: `WorkerClient` builds the requests and checks
 // the events (docs/worker-protocol.md); this file reacts to them.
 
-import initViewer, { Viewer, WorkerClient, fragment_with_time, parse_fragment, share_fragment } from './pkg/egoexo_viewer.js';
+import initViewer, { Viewer, WorkerClient, fragment_with_time, parse_fragment, participant_colour, share_fragment } from './pkg/egoexo_viewer.js';
 import { createLive } from './live.js';
 import { exportPng, exportVideo } from './video.js';
 import { deleteShare, fetchShare, forgetShare, loadShareConfig, megabytes, rememberShare, savedShares, uploadShare } from './share.js';
@@ -59,12 +59,13 @@ function showProgress(text, fraction) {
 function setBusy(busy) {
   state.busy = busy;
   for (const el of [$('file-input'), $('folder-input'), $('sample-button')]) el.disabled = busy;
-  for (const el of document.querySelectorAll('#export-buttons button')) el.disabled = busy;
+  for (const el of document.querySelectorAll('#export-buttons button, #participants button')) el.disabled = busy;
   $('cancel-button').disabled = !busy;
   if (!busy) $('progress-panel').hidden = true;
 }
 
 function fail(title, message) {
+  state.selecting = null;
   setBusy(false);
   showError(title, message);
   setState('error');
@@ -149,9 +150,23 @@ function onWorkerEvent(event) {
       markOnce('egoexo:imported');
       state.session = event.summary;
       showSession(event.summary);
+      if (state.selecting) {
+        // Another participant of the capture: their reconstruction follows when there is one.
+        if (!(state.summary?.participants ?? []).some((p) => p.id === event.summary.participant)) {
+          state.selecting = null;
+          setBusy(false);
+          setState('ready');
+        }
+        break;
+      }
       startReconstruction();
       break;
     case 'reconstructed':
+      if (state.selecting) {
+        showScene(event.scene, event.summary, state.selecting.how, state.selecting.frame);
+        state.selecting = null;
+        break;
+      }
       state.openedShare = null;
       showScene(event.scene, event.summary, `in ${((performance.now() - state.reconstructStarted) / 1000).toFixed(1)} s`);
       break;
@@ -161,7 +176,8 @@ function onWorkerEvent(event) {
     case 'share-opened':
       state.openedShare = { includes_recording: event.includes_recording };
       showSession(event.session);
-      showScene(event.scene, event.summary, `(shared, made by ${event.created_by})`);
+      state.sharedBy = `(shared, made by ${event.created_by})`;
+      showScene(event.scene, event.summary, state.sharedBy);
       break;
     case 'exported':
       download(event.file.bytes, event.file.file_name, event.file.mime_type);
@@ -347,9 +363,41 @@ function facts(dl, rows) {
   }));
 }
 
+// A capture of several participants: one button per participant reconstructed, in its
+// colour; the pressed one is shown (their facts, plots and exports).
+function showParticipants(s) {
+  const box = $('participants');
+  const people = (s.participants ?? []).filter((p) => p.reconstruct);
+  box.hidden = people.length === 0;
+  box.replaceChildren(...people.map((p) => {
+    const button = document.createElement('button');
+    button.type = 'button';
+    button.dataset.participant = p.id;
+    button.setAttribute('aria-pressed', String(p.id === s.participant));
+    const swatch = document.createElement('span');
+    swatch.className = 'swatch';
+    swatch.style.background = participant_colour(p.colour);
+    button.append(swatch, p.id);
+    button.title = `${p.devices.join(', ')}${p.camera ? `; camera ${p.camera}` : ''}`;
+    button.addEventListener('click', () => selectParticipant(p.id));
+    return button;
+  }));
+}
+
+function selectParticipant(id) {
+  if (state.busy || state.session?.participant === id) return;
+  const frame = state.viewer && state.summary ? state.viewer.frame() : null;
+  const how = state.openedShare ? state.sharedBy : '';
+  state.selecting = { id, frame, how };
+  setBusy(true);
+  setState('busy');
+  state.client.select_participant(id);
+}
+
 function showSession(s) {
   $('session-panel').hidden = false;
   $('session-name').textContent = s.name;
+  showParticipants(s);
   facts($('session-facts'), [
     ['source', s.source],
     ['timeline', `${s.frames} frames at ${s.fps} fps (${s.duration_s.toFixed(1)} s)`],
@@ -372,7 +420,7 @@ function showSession(s) {
   $('result-facts').replaceChildren();
 }
 
-function showScene(scene, summary, how) {
+function showScene(scene, summary, how, keepFrame = null) {
   const viewer = state.viewer;
   try {
     if (!viewer) throw new Error('the 3D view could not start (see above)');
@@ -400,6 +448,16 @@ function showScene(scene, summary, how) {
     rows.push(['MPJPE vs ground truth', `${a.ego_exo_mpjpe_cm.toFixed(1)} cm` +
       (a.ego_only_mpjpe_cm == null ? '' : ` (ego-only ${a.ego_only_mpjpe_cm.toFixed(1)} cm)`)]);
   }
+  // A capture: every participant's row, and who was who in cameras without identities.
+  for (const p of summary.participants ?? []) {
+    if (p.id === summary.participant) continue;
+    rows.push([p.id, `${p.method}, ${p.valid_frames} of ${p.frames} frames` +
+      (p.accuracy ? `, MPJPE ${p.accuracy.ego_exo_mpjpe_cm.toFixed(1)} cm` : '')]);
+  }
+  for (const a of summary.association ?? []) {
+    const assigned = Object.entries(a.assigned).map(([id, n]) => `${n} to ${id}`).join(', ') || 'none assigned';
+    rows.push([`people (${a.observer})`, `${a.detections} over ${a.frames} frames: ${assigned}; ${a.unassigned} bystanders`]);
+  }
   facts($('result-facts'), rows);
   $('view-panel').hidden = false;
   const frames = viewer.frames();
@@ -415,7 +473,10 @@ function showScene(scene, summary, how) {
   viewer.clear_loop();
   const time = state.pendingTime;
   state.pendingTime = null;
-  if (time) {
+  if (keepFrame != null) {
+    // Another participant of the same capture: the same moment.
+    viewer.seek(Math.min(frames - 1, keepFrame));
+  } else if (time) {
     // A link to a moment: show that frame (paused), or play its range in a loop.
     const fps = viewer.fps();
     const start = Math.min(frames - 1, Math.round(time.start * fps));

@@ -4,7 +4,8 @@
 
 import assert from 'node:assert/strict';
 import { execFileSync } from 'node:child_process';
-import { readFileSync, rmSync, writeFileSync } from 'node:fs';
+import { cpSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
+import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { after, before, describe, test } from 'node:test';
 
@@ -352,15 +353,6 @@ describe('bad input and failures', () => {
       assert.equal(await app.waitState(['error', 'ready']), 'error');
       assert.match(await app.text('#error-message'), /^notes\.txt: not a readable zip archive/);
 
-      // A capture of several participants (format version 3) is the CLI's for now: the page
-      // says so instead of showing one of them.
-      const group = join(OUT, 'group.egoexo');
-      execFileSync(BIN, ['walk', '--seconds', '4', '--participants', '2', '-o', group], { stdio: ['ignore', 'ignore', 'inherit'] });
-      await app.page.click('#error-dismiss');
-      await app.page.setInputFiles('#file-input', group);
-      assert.equal(await app.waitState(['error', 'ready']), 'error');
-      assert.match(await app.text('#error-message'), /exactly one participant to reconstruct .*2 participants to reconstruct/);
-
       // Not frozen, not blank: the controls answer and the canvas is still there.
       assert.equal(await app.page.locator('#sample-button').isEnabled(), true);
       assert.equal(await app.page.locator('#view').isVisible(), true);
@@ -381,6 +373,36 @@ describe('bad input and failures', () => {
       assert.deepEqual(app.errors, []);
     } finally {
       await app.close();
+    }
+  });
+
+  test('a dropped Nymeria sequence with two participants (people files): both reconstructed, the cameras\' people associated', async () => {
+    // The Nymeria fixture plus people files: the observer's camera sees the wearer and a
+    // bystander, the wearer's camera the observer.
+    const dir = mkdtempSync(join(tmpdir(), 'egoexo-nymeria-two-'));
+    const sequence = join(dir, 'sequence');
+    cpSync(join(REPO, 'crates/egoexo-session/tests/fixtures/nymeria'), sequence, { recursive: true });
+    cpSync(join(REPO, 'crates/egoexo-session/tests/fixtures/nymeria_people'), sequence, { recursive: true });
+    const app = await openApp(browser, '?backend=webgl2');
+    try {
+      await app.waitState('idle');
+      await app.page.setInputFiles('#folder-input', sequence);
+      assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
+      assert.deepEqual(await app.page.locator('#participants button').allTextContents(), ['wearer', 'observer']);
+      const summary = await app.page.evaluate(() => window.egoexo.summary);
+      assert.deepEqual(summary.participants.map((p) => p.id), ['wearer', 'observer']);
+      assert.ok(summary.participants.every((p) => p.valid_frames > 0), JSON.stringify(summary.participants));
+      const observerCamera = summary.association.find((a) => a.observer === 'observer');
+      assert.equal(observerCamera.assigned.wearer, 61, JSON.stringify(summary.association));
+      assert.ok(observerCamera.unassigned > 0, 'the bystander matches nobody');
+      assert.match(await app.text('#result-facts'), /people \(observer\)\s*\d+ over \d+ frames: 61 to wearer; \d+ bystanders/);
+      await app.page.click('[data-participant=observer]');
+      assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
+      assert.equal(await app.page.evaluate(() => window.egoexo.summary.participant), 'observer');
+      assert.deepEqual(app.errors, []);
+    } finally {
+      await app.close();
+      rmSync(dir, { recursive: true, force: true });
     }
   });
 

@@ -29,6 +29,82 @@ const shownJoints = (app, frame) => app.page.evaluate((f) => {
   return scene.joints.slice(f * 72, (f + 1) * 72);
 }, frame);
 
+describe('a capture of several participants', () => {
+  test('both are reconstructed and drawn together; each is shown in turn, exported, and shared by one link', async () => {
+    const dir = mkdtempSync(join(tmpdir(), 'egoexo-pair-'));
+    const file = join(dir, 'pair.egoexo');
+    execFileSync(process.env.EGOEXO_BIN ?? 'egoexo', ['walk', '--seconds', '4', '--participants', '2', '--bystanders', '1', '-o', file],
+      { stdio: ['ignore', 'ignore', 'inherit'] });
+    const app = await openApp(browser, '?backend=webgl2');
+    const sceneOf = (a) => a.page.evaluate(() => JSON.parse(new TextDecoder().decode(window.egoexo.scene)));
+    try {
+      assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
+      const dropped = Date.now();
+      await app.page.setInputFiles('#file-input', file);
+      assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
+      const reconstructMs = Date.now() - dropped;
+      const { page } = app;
+      // One button per participant, the first pressed; both bodies in the scene.
+      assert.deepEqual(await page.locator('#participants button').allTextContents(), ['participant-1', 'participant-2']);
+      assert.equal(await page.getAttribute('[data-participant=participant-1]', 'aria-pressed'), 'true');
+      assert.deepEqual(await page.evaluate(() => window.egoexo.viewer.participants().map((p) => [p.id, p.shown])),
+        [['participant-1', true], ['participant-2', false]]);
+      const first = await sceneOf(app);
+      assert.equal(first.participant.id, 'participant-1');
+      assert.equal(first.others.length, 1);
+      assert.ok(first.others[0].valid.filter(Boolean).length > first.frames / 2);
+      // Everyone's row and the association (with a bystander) in the facts.
+      const facts = await app.text('#result-facts');
+      assert.match(facts, /participant-2\s*ego-exo/);
+      assert.match(facts, /people \(participant-1\)\s*\d+ over \d+ frames: \d+ to participant-2; \d+ bystanders/);
+      assert.match(await app.text('#session-name'), /participant-1/);
+      console.log(`GROUP ${JSON.stringify({ participants: 2, frames: first.frames, drop_to_ready_ms: reconstructMs })}`);
+
+      // The other one: their facts, plots and exports, at the same moment, nothing recomputed.
+      await page.click('#play-button'); // pause
+      await page.evaluate(() => window.egoexo.viewer.seek(40));
+      await page.click('[data-participant=participant-2]');
+      assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
+      assert.equal(await page.getAttribute('[data-participant=participant-2]', 'aria-pressed'), 'true');
+      assert.match(await app.text('#session-name'), /participant-2/);
+      assert.equal(await page.evaluate(() => window.egoexo.summary.participant), 'participant-2');
+      assert.equal(await page.evaluate(() => window.egoexo.viewer.frame()), 40);
+      const second = await sceneOf(app);
+      assert.equal(second.participant.id, 'participant-2');
+      assert.equal(second.others[0].participant.id, 'participant-1');
+      if (second.start_s === first.start_s) {
+        assert.deepEqual(second.others[0].joints.slice(40 * 72, 41 * 72), first.joints.slice(40 * 72, 41 * 72));
+      }
+      const [download] = await Promise.all([page.waitForEvent('download'), page.click('[data-format=bvh]')]);
+      assert.match(download.suggestedFilename(), /participant-2-ego-exo\.bvh$/);
+      await app.waitState('ready');
+
+      // One link carries both.
+      await page.getByRole('button', { name: 'Share', exact: true }).click();
+      await page.getByRole('button', { name: 'Create link' }).click();
+      await page.waitForFunction(() => document.getElementById('share-link').value !== '', null, { timeout: 120_000 });
+      const shared = await page.getByRole('textbox', { name: 'Share link' }).inputValue();
+      await page.click('#share-close');
+      const other = await openApp(browser, `?backend=webgl2${shared.slice(shared.indexOf('#'))}`);
+      try {
+        assert.equal(await other.waitState(['ready', 'error']), 'ready', await other.text('#error-message'));
+        assert.equal(await other.page.getAttribute('[data-participant=participant-2]', 'aria-pressed'), 'true');
+        assert.deepEqual((await sceneOf(other)).joints, second.joints);
+        await other.page.click('[data-participant=participant-1]');
+        assert.equal(await other.waitState(['ready', 'error']), 'ready', await other.text('#error-message'));
+        assert.deepEqual((await sceneOf(other)).joints, first.joints);
+        assert.deepEqual(other.errors, []);
+      } finally {
+        await other.close();
+      }
+      assert.deepEqual(app.errors, []);
+    } finally {
+      await app.close();
+      rmSync(dir, { recursive: true, force: true });
+    }
+  });
+});
+
 describe('a shared reconstruction', () => {
   let app;
   let link;

@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 
 /// The protocol's version; the worker says it in [`WorkerEvent::Ready`], and the page refuses
 /// a worker that speaks another.
-pub const WORKER_PROTOCOL_VERSION: u32 = 5;
+pub const WORKER_PROTOCOL_VERSION: u32 = 6;
 
 /// A job's number, chosen by the page (unique per worker).
 pub type JobId = u32;
@@ -65,6 +65,11 @@ pub enum WorkerRequest<B> {
     LiveStop { job: JobId, keep: bool, name: String },
     /// Write the open session as a `.egoexo` file. Answered by `exported` or `error`.
     SaveSession { job: JobId },
+    /// Show participant `participant` (an id of the open capture's `participants`): their
+    /// facts, plots and exports, the others drawn with them. Answered by `imported` (their
+    /// session's summary) and then, when there is a reconstruction, `reconstructed` (their
+    /// part of it; nothing is computed again), or by `error`.
+    SelectParticipant { job: JobId, participant: String },
     /// Panic inside the worker's Rust code (tests of the page's crash handling).
     PanicForTest,
     /// Pool coordinator → helper (a nested worker of the page's worker; "The worker pool"
@@ -88,6 +93,7 @@ impl<B> WorkerRequest<B> {
             | WorkerRequest::OpenShare { job, .. }
             | WorkerRequest::LiveStop { job, .. }
             | WorkerRequest::SaveSession { job }
+            | WorkerRequest::SelectParticipant { job, .. }
             | WorkerRequest::PoolJob { job, .. }
             | WorkerRequest::PoolChunk { job, .. } => Some(*job),
             WorkerRequest::WarmUp
@@ -140,6 +146,9 @@ impl<B> WorkerRequest<B> {
             WorkerRequest::LiveLookahead { frames } => WorkerRequest::LiveLookahead { frames },
             WorkerRequest::LiveStop { job, keep, name } => WorkerRequest::LiveStop { job, keep, name },
             WorkerRequest::SaveSession { job } => WorkerRequest::SaveSession { job },
+            WorkerRequest::SelectParticipant { job, participant } => {
+                WorkerRequest::SelectParticipant { job, participant }
+            }
             WorkerRequest::PoolJob { job, session, overlay, chunk_windows } => {
                 WorkerRequest::PoolJob { job, session: f(session)?, overlay, chunk_windows }
             }
@@ -499,6 +508,10 @@ pub struct LiveFrameInfo {
     /// latency into the part up to the worker's post and the part after.
     #[serde(default)]
     pub posted_ms: Option<f64>,
+    /// A room of several wearers: every wearer drawn, the one `frame`'s facts are about
+    /// first (added in version 6; absent for one wearer).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub wearers: Vec<String>,
 }
 
 /// One file a models manifest lists.
@@ -585,6 +598,31 @@ pub struct SessionSummary {
     pub ground_truth: bool,
     /// What the import noticed (each `file: message`).
     pub warnings: Vec<String>,
+    /// A capture of several participants (`.egoexo` version 3, a multi-device recording with
+    /// people files): everyone in it, in the capture's order; empty for one wearer. The rest
+    /// of the summary is about `participant`'s session (the others are its observers).
+    /// (Added in version 6.)
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub participants: Vec<ParticipantSummary>,
+    /// The participant shown, in a capture of several.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub participant: Option<String>,
+}
+
+/// One participant of a capture ([`SessionSummary::participants`]).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ParticipantSummary {
+    pub id: String,
+    /// Whether the capture reconstructs them (else they are only an observer).
+    pub reconstruct: bool,
+    /// Their colour in the viewer: an index into the page's participant palette, fixed by the
+    /// capture's order so it does not change with the selection.
+    pub colour: usize,
+    /// Their devices: `head`, and `left_wrist` / `right_wrist` when tracked.
+    pub devices: Vec<String>,
+    /// Their camera (projection and image size), when it sees the others.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<String>,
 }
 
 /// One wrist of the wearer on the timeline.
@@ -658,6 +696,46 @@ pub struct ReconstructionSummary {
     /// session keeps them: later jobs skip the step).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub detection: Vec<DetectionSummary>,
+    /// A capture of several participants: the participant this summary is about (the rest of
+    /// its fields), in `participants`' order. (Added in version 6.)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub participant: Option<String>,
+    /// Every participant the job reconstructed, in the capture's order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub participants: Vec<ParticipantResult>,
+    /// Who is who in the cameras whose people had no identity, per camera.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub association: Vec<AssociationSummary>,
+}
+
+/// One participant's reconstruction ([`ReconstructionSummary::participants`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ParticipantResult {
+    pub id: String,
+    pub method: String,
+    pub tracking_points: u8,
+    pub frames: usize,
+    pub valid_frames: usize,
+    pub exo_evidence_frames: usize,
+    /// Per observer (the other participants' cameras): frames it contributed a ray.
+    pub observer_ray_frames: BTreeMap<String, usize>,
+    pub accuracy: Option<Accuracy>,
+}
+
+/// The association of one camera's people without identity with the participants
+/// ([`ReconstructionSummary::association`]).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct AssociationSummary {
+    /// The participant whose camera it is.
+    pub observer: String,
+    /// Frames of its people file.
+    pub frames: usize,
+    /// People detected over all frames.
+    pub detections: usize,
+    /// Detections assigned, per participant id.
+    pub assigned: BTreeMap<String, usize>,
+    /// Detections that matched nobody (bystanders).
+    pub unassigned: usize,
 }
 
 /// What the detector step did for one observer ([`ReconstructionSummary::detection`]).

@@ -50,6 +50,31 @@ pub struct SceneData {
     /// Series for the timeline plots (scenes from before they existed have none).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub timeline: Option<TimelineData>,
+    /// In a capture of several participants: who `joints` is (the others are in `others`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub participant: Option<SceneParticipant>,
+    /// The capture's other reconstructed participants, on this scene's frames (same world).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub others: Vec<OtherBody>,
+}
+
+/// A participant of a capture, as the viewer names and colours them.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SceneParticipant {
+    pub id: String,
+    /// Index into the viewer's participant palette (the capture's order, so a participant
+    /// keeps their colour whoever is selected).
+    pub colour: usize,
+}
+
+/// Another participant's reconstructed body, drawn with the scene's wearer.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OtherBody {
+    pub participant: SceneParticipant,
+    /// `frames × 24 × 3` joint positions (world), on the scene's frames.
+    pub joints: Vec<f32>,
+    /// Frames where they were reconstructed (and the scene's time lies in their timeline).
+    pub valid: Vec<bool>,
 }
 
 /// A device trajectory.
@@ -112,6 +137,8 @@ impl SceneData {
             floor_y: 0.0,
             method: method.to_string(),
             timeline: None,
+            participant: None,
+            others: Vec::new(),
         }
     }
 
@@ -143,6 +170,10 @@ impl SceneData {
             expect(&format!("observer {} camera_poses", o.id), o.camera_poses.len(), 7 * f);
             expect(&format!("observer {} valid", o.id), o.valid.len(), f);
             expect(&format!("observer {} rays", o.id), o.rays.len(), 4 * EXO_KEYPOINT_COUNT * f);
+        }
+        for o in &self.others {
+            expect(&format!("participant {} joints", o.participant.id), o.joints.len(), joints);
+            expect(&format!("participant {} valid", o.participant.id), o.valid.len(), f);
         }
         if let Some(t) = &self.timeline {
             problems.extend(t.check(f, self.observers.len()));
@@ -193,7 +224,43 @@ impl SceneData {
             floor_y: self.floor_y,
             method: self.method.clone(),
             timeline: self.timeline.as_ref().map(|t| t.frames_slice(start, end)),
+            participant: self.participant.clone(),
+            others: self
+                .others
+                .iter()
+                .map(|o| OtherBody {
+                    participant: o.participant.clone(),
+                    joints: per(&o.joints, joints),
+                    valid: flags(&o.valid),
+                })
+                .collect(),
         }
+    }
+}
+
+impl SceneData {
+    /// This scene with `others` drawn along: each of their scenes (the same capture's other
+    /// participants, reconstructed on their own timelines) resampled onto this scene's frames
+    /// by time — the nearest frame, valid where theirs is and the time lies in their timeline.
+    pub fn with_others<'a>(mut self, others: impl IntoIterator<Item = &'a SceneData>) -> SceneData {
+        let joints = NUM_JOINTS * 3;
+        for other in others {
+            let Some(participant) = other.participant.clone() else { continue };
+            let mut body =
+                OtherBody { participant, joints: vec![0.0; self.frames * joints], valid: vec![false; self.frames] };
+            for i in 0..self.frames {
+                let t = self.start_s + i as f64 / f64::from(self.fps);
+                let at = ((t - other.start_s) * f64::from(other.fps)).round();
+                if at < 0.0 || at >= other.frames as f64 {
+                    continue;
+                }
+                let j = at as usize;
+                body.joints[i * joints..(i + 1) * joints].copy_from_slice(&other.joints[j * joints..(j + 1) * joints]);
+                body.valid[i] = other.valid[j];
+            }
+            self.others.push(body);
+        }
+        self
     }
 }
 
@@ -231,6 +298,31 @@ mod tests {
         assert_eq!(o.ray(2, 0), None);
         assert_eq!(o.ray(0, EXO_KEYPOINT_COUNT), None);
         assert_eq!(o.ray(usize::MAX, 0), None);
+    }
+
+    #[test]
+    fn others_are_resampled_onto_the_scene_by_time() {
+        let mut scene = SceneData::new("a", 30.0, 6, "ego-exo");
+        scene.participant = Some(SceneParticipant { id: "a".into(), colour: 0 });
+        let mut other = SceneData::new("b", 30.0, 4, "ego-exo");
+        other.participant = Some(SceneParticipant { id: "b".into(), colour: 1 });
+        other.start_s = 2.0 / 30.0; // their frame 0 is our frame 2
+        for (f, v) in other.valid.iter_mut().enumerate() {
+            *v = f != 1;
+        }
+        other.joints.chunks_mut(NUM_JOINTS * 3).enumerate().for_each(|(f, j)| j.fill(f as f32 + 1.0));
+        let mut unnamed = other.clone();
+        unnamed.participant = None;
+        let both = scene.with_others([&other, &unnamed]);
+        both.check().unwrap();
+        assert_eq!(both.others.len(), 1, "a scene without a participant is nobody to draw");
+        let b = &both.others[0];
+        assert_eq!(b.valid, vec![false, false, true, false, true, true]);
+        let first_joint: Vec<f32> = b.joints.chunks(NUM_JOINTS * 3).map(|j| j[0]).collect();
+        assert_eq!(first_joint, vec![0.0, 0.0, 1.0, 2.0, 3.0, 4.0]);
+        let sliced = both.frames_slice(4..6);
+        sliced.check().unwrap();
+        assert_eq!(sliced.others[0].valid, vec![true, true]);
     }
 
     #[test]

@@ -16,7 +16,7 @@ pub mod container;
 pub mod envelope;
 pub mod link;
 
-pub use container::{ShareContents, ShareManifest, pack, unpack};
+pub use container::{ShareContents, ShareManifest, SharedParticipant, pack, unpack};
 pub use link::{LinkFragment, LinkTime, ShareId, ShareKey, ShareLink};
 
 use thiserror::Error;
@@ -36,7 +36,7 @@ pub enum ShareError {
     Decrypt,
     #[error("the share container: {0}")]
     Container(String),
-    #[error("the share container is version {found}; this egoexo reads version {supported}")]
+    #[error("the share container is version {found}; this egoexo reads versions 1 to {supported}")]
     ContainerVersion { found: u32, supported: u32 },
     #[error("the share link: {0}")]
     Link(String),

@@ -60,6 +60,28 @@ pub const HEAD_DEVICE: Rgba = [1.00, 0.84, 0.20, 1.0];
 pub const OBSERVERS: [Rgba; 4] =
     [[0.30, 0.90, 0.95, 1.0], [0.95, 0.45, 0.85, 1.0], [0.70, 0.95, 0.35, 1.0], [0.95, 0.75, 0.45, 1.0]];
 
+/// Other participants of a capture, by their colour index (the capture's order, cycled):
+/// one colour per body, none of them the wearer's side colours, the overlay's or the ghost's.
+pub const PARTICIPANTS: [Rgba; 6] = [
+    [0.98, 0.78, 0.28, 1.0],
+    [0.36, 0.86, 0.52, 1.0],
+    [0.93, 0.40, 0.58, 1.0],
+    [0.45, 0.78, 1.00, 1.0],
+    [0.80, 0.62, 0.98, 1.0],
+    [0.55, 0.92, 0.88, 1.0],
+];
+
+/// Participant colour `index` (cycled).
+pub fn participant_colour(index: usize) -> Rgba {
+    PARTICIPANTS[index % PARTICIPANTS.len()]
+}
+
+/// `c` as a CSS colour (`rgb(r g b)`), for the page's legend.
+pub fn css(c: Rgba) -> String {
+    let byte = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+    format!("rgb({} {} {})", byte(c[0]), byte(c[1]), byte(c[2]))
+}
+
 /// Gate value `0` (ray ignored) → red, `0.5` → yellow, `1` (ray trusted) → green; values
 /// outside `0..=1` are clamped and a non-finite gate is drawn as red.
 pub fn gate_colour(gate: f32) -> Rgba {

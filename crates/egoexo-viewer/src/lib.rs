@@ -15,7 +15,8 @@
 //! each tracked observer as a camera frustum (from `camera_poses` and `half_fov`, with a small
 //! "up" marker) and its rays from the camera centre to the ray endpoints, coloured by gate
 //! (red 0 → yellow 0.5 → green 1); the ground truth as a translucent cyan ghost; the ego-only
-//! reconstruction as a translucent violet overlay.
+//! reconstruction as a translucent violet overlay; in a capture of several participants, the
+//! others' bodies beside the wearer, each in its own colour (`colors::PARTICIPANTS`).
 //!
 //! # JS API (`wasm-bindgen --target web`)
 //! ```js
@@ -30,6 +31,8 @@
 //! viewer.set_show_body(b);           // bodies of capsules (default) or stick figures
 //! viewer.set_follow(b); viewer.follows();   // the orbit target moves with the wearer
 //! viewer.observer_ids();             // ['observer-1', …]
+//! viewer.participants();             // a capture's: [{id, colour, shown}], the shown one first; [] for one wearer
+//! participant_colour(i);             // CSS colour of participant colour index i
 //! viewer.set_view_from_observer(i);  // look through observer i's camera; -1: the orbit view
 //! viewer.view_from_observer();
 //! viewer.plot_layout();              // the timeline plots' rows {kind, label, top, height, index}, height, error_max_cm
@@ -54,6 +57,7 @@
 //! client.warm_up();                            // load the models now
 //! const job = client.open_archive(name, bytes); // or open_files(name, paths, contents)
 //! client.reconstruct(true); client.export('glb'); client.cancel();
+//! client.select_participant('participant-2');  // a capture: show another participant
 //! worker.onmessage = (e) => { const event = client.receive(e.data); if (event) … };
 //! ```
 //! `timeSeconds` counts from the first frame (`frame / fps`); the session clock adds
@@ -101,7 +105,9 @@ pub mod scene;
 mod web;
 
 #[cfg(target_arch = "wasm32")]
-pub use web::{Viewer, WorkerClient, fragment_with_time, mux_h264_mp4, parse_fragment, share_fragment};
+pub use web::{
+    Viewer, WorkerClient, fragment_with_time, mux_h264_mp4, parse_fragment, participant_colour, share_fragment,
+};
 
 pub use error::{ActiveBackend, BackendPreference, ViewerError};
 

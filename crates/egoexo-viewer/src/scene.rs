@@ -353,18 +353,42 @@ fn push_observer(list: &mut FrameDrawList, o: &ObserverScene, index: usize, fram
 
 /// What the viewer derives once per scene to draw any of its frames: the bodies' sizes, the
 /// floor's extent and whether the wearer walks about.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct SceneGeometry {
     /// [`subject_scale`] of the reconstruction (and of the ego-only overlay).
     pub body_scale: f32,
     /// [`subject_scale`] of the ground truth.
     pub ground_truth_scale: f32,
+    /// [`subject_scale`] of each of the capture's other participants (`scene.others`).
+    pub others_scale: Vec<f32>,
     /// Centre of the floor disc (world, at `floor_y`) and its radius, metres.
     pub floor_centre: Vec3,
     pub floor_radius: f32,
     /// The wearer's pelvis covers more than [`MOVING_WEARER_M`] horizontally over the session:
     /// the view follows it by default.
     pub moving_wearer: bool,
+}
+
+/// One entry of the page's participant legend ([`participant_legend`]).
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct LegendEntry {
+    pub id: String,
+    /// CSS colour of their body (the shown participant: their palette colour, for the legend).
+    pub colour: String,
+    /// Whether this is the participant shown (side colours, the facts and plots are theirs).
+    pub shown: bool,
+}
+
+/// A capture's participants as the viewer draws them: the shown one first, then the others;
+/// empty for a scene of one wearer.
+pub fn participant_legend(scene: &SceneData) -> Vec<LegendEntry> {
+    let Some(shown) = &scene.participant else { return Vec::new() };
+    let entry = |p: &egoexo_scene::SceneParticipant, shown: bool| LegendEntry {
+        id: p.id.clone(),
+        colour: colors::css(colors::participant_colour(p.colour)),
+        shown,
+    };
+    std::iter::once(entry(shown, true)).chain(scene.others.iter().map(|o| entry(&o.participant, false))).collect()
 }
 
 /// Horizontal extent (the diagonal of the box the pelvis covers) beyond which a wearer counts
@@ -390,6 +414,7 @@ impl SceneGeometry {
         Self {
             body_scale: subject_scale(&scene.joints, scene.frames),
             ground_truth_scale: scene.ground_truth_joints.as_deref().map_or(1.0, |j| subject_scale(j, scene.frames)),
+            others_scale: scene.others.iter().map(|o| subject_scale(&o.joints, scene.frames)).collect(),
             floor_centre,
             floor_radius,
             moving_wearer,
@@ -457,6 +482,17 @@ pub fn build_frame(scene: &SceneData, geometry: &SceneGeometry, frame: usize, la
         draw(&mut list, &joints, geometry.body_scale, style);
         push_contact_shadows(&mut list, &joints, geometry.body_scale, scene.floor_y);
     }
+    // The capture's other participants: one colour each, the same body scale as theirs.
+    for (o, other) in scene.others.iter().enumerate() {
+        if let Some(joints) = frame_joints(&other.joints, frame) {
+            let valid = other.valid.get(frame).copied().unwrap_or(false);
+            let colour = colors::participant_colour(other.participant.colour);
+            let style = SkeletonStyle { thickness: 1.0, colour: Some(colour), dimmed: !valid };
+            let scale = geometry.others_scale.get(o).copied().unwrap_or(1.0);
+            draw(&mut list, &joints, scale, style);
+            push_contact_shadows(&mut list, &joints, scale, scene.floor_y);
+        }
+    }
     if layers.ego_only
         && let Some(joints) = scene.ego_only_joints.as_deref().and_then(|j| frame_joints(j, frame))
     {
@@ -507,9 +543,10 @@ pub fn scene_bounds(scene: &SceneData) -> Option<Bounds> {
     let stride = scene.frames.div_ceil(2000).max(1);
     let frames = (0..scene.frames).step_by(stride);
     let joints = frames.clone().filter_map(|f| frame_joints(&scene.joints, f)).flatten();
+    let others = scene.others.iter().flat_map(|o| frames.clone().filter_map(|f| frame_joints(&o.joints, f)).flatten());
     let observers =
         scene.observers.iter().flat_map(|o| frames.clone().filter_map(move |f| observer_pose(o, f).map(|(_, t)| t)));
-    with_floor(Bounds::around(joints.chain(observers))?, scene.floor_y)
+    with_floor(Bounds::around(joints.chain(others).chain(observers))?, scene.floor_y)
 }
 
 /// The box the default view frames at `frame`: the wearer over the whole session (sampled to
@@ -518,8 +555,9 @@ pub fn scene_bounds(scene: &SceneData) -> Option<Bounds> {
 pub fn view_bounds(scene: &SceneData, frame: usize) -> Option<Bounds> {
     let stride = scene.frames.div_ceil(2000).max(1);
     let joints = (0..scene.frames).step_by(stride).filter_map(|f| frame_joints(&scene.joints, f)).flatten();
+    let others = scene.others.iter().filter_map(|o| frame_joints(&o.joints, frame)).flatten();
     let observers = scene.observers.iter().filter_map(|o| observer_pose(o, frame).map(|(_, t)| t));
-    with_floor(Bounds::around(joints.chain(observers))?, scene.floor_y)
+    with_floor(Bounds::around(joints.chain(others).chain(observers))?, scene.floor_y)
 }
 
 /// The box a following view frames at `frame`: the wearer's body now with room to move
@@ -641,6 +679,39 @@ mod tests {
         let left_wrist = Vec3::from_slice(&scene.joints[(3 * 24 + 20) * 3..]);
         assert!(list.spheres.iter().any(|s| Vec3::from(s.a) == left_wrist && s.colour == colors::LEFT));
         assert!(list.all().all(|s| s.a.iter().chain(&s.b).all(|v| v.is_finite())));
+    }
+
+    #[test]
+    fn other_participants_are_drawn_in_their_colour_beside_the_wearer() {
+        let mut scene = example_scene(10);
+        scene.participant = Some(egoexo_scene::SceneParticipant { id: "alice".into(), colour: 0 });
+        let mut bob = example_scene(10);
+        bob.participant = Some(egoexo_scene::SceneParticipant { id: "bob".into(), colour: 1 });
+        bob.joints.chunks_mut(3).for_each(|p| p[0] += 2.0); // two metres to the side
+        bob.valid[4] = false;
+        let scene = scene.with_others([&bob]);
+        validate_scene(&scene).unwrap();
+        let bob_colour = colors::participant_colour(1);
+        let list = build_frame(&scene, 3, STICK_ONLY);
+        let bob_joints: Vec<_> = list.spheres.iter().filter(|s| s.colour == bob_colour).collect();
+        assert_eq!(bob_joints.len(), 24);
+        let wrist = Vec3::from_slice(&scene.others[0].joints[(3 * 24 + 20) * 3..]);
+        assert!(bob_joints.iter().any(|s| Vec3::from(s.a) == wrist));
+        assert_eq!(list.spheres.iter().filter(|s| s.colour == colors::LEFT).count(), 9, "the wearer as before");
+        // Not reconstructed at that frame: dimmed, like the wearer's invalid frames.
+        let list = build_frame(&scene, 4, STICK_ONLY);
+        assert!(!list.spheres.iter().any(|s| s.colour == bob_colour));
+        assert!(list.translucent_spheres.iter().any(|s| s.colour == colors::dimmed(bob_colour)));
+        // The view frames both of them.
+        let bounds = scene_bounds(&scene).unwrap();
+        assert!(bounds.max.x >= wrist.x);
+        let legend = participant_legend(&scene);
+        assert_eq!(
+            legend.iter().map(|e| (e.id.as_str(), e.shown)).collect::<Vec<_>>(),
+            [("alice", true), ("bob", false)]
+        );
+        assert_eq!(legend[1].colour, colors::css(bob_colour));
+        assert!(participant_legend(&example_scene(2)).is_empty());
     }
 
     #[test]

@@ -39,5 +39,6 @@ pub mod xr;
 #[cfg(target_arch = "wasm32")]
 pub use runtime::{MODEL_CACHE, TEST_PANIC_MESSAGE, WorkerApp};
 pub use worker::{
-    ExportedFile, JobProgress, PoolHelperJob, ReconstructionTask, SessionWorker, WorkerClock, WorkerError,
+    ExportedFile, JobProgress, PoolHelperJob, ReconstructionTask, SelectedParticipant, SessionWorker, WorkerClock,
+    WorkerError,
 };

@@ -32,7 +32,7 @@ use egoexo_protocol::JsBytes;
 use egoexo_protocol::js::{event_from_js, request_from_js};
 use egoexo_protocol::worker::{
     ErrorKind, ErrorStage, ExportFormat, ExportedFile, JobId, JobStage, ModelFileRef, ModelsSummary, PoolSummary,
-    SessionInput, WORKER_PROTOCOL_VERSION, WorkerEvent, WorkerRequest,
+    ReconstructionSummary, SessionInput, WORKER_PROTOCOL_VERSION, WorkerEvent, WorkerRequest,
 };
 use js_sys::{Array, Promise, Uint8Array};
 use wasm_bindgen::JsCast;
@@ -132,6 +132,7 @@ impl WorkerApp {
             helper_inbox: RefCell::new(VecDeque::new()),
             wake: RefCell::new(None),
             pool_job: RefCell::new(None),
+            progress_scope: RefCell::new(None),
         });
         runtime.post(Event::Ready { protocol: WORKER_PROTOCOL_VERSION });
         Ok(WorkerApp { runtime })
@@ -237,6 +238,20 @@ struct Runtime {
     wake: RefCell<Option<js_sys::Function>>,
     /// As a helper: the coordinator's job held.
     pool_job: RefCell<Option<(JobId, PoolHelperJob)>>,
+    /// While a capture's participants are reconstructed in turn: whose job runs.
+    progress_scope: RefCell<Option<ProgressScope>>,
+}
+
+/// Which participant of how many a reconstruction's progress is about.
+#[derive(Clone, Debug, Default)]
+struct ProgressScope {
+    participant: String,
+    index: usize,
+    count: usize,
+    /// Steps of the participants before this one.
+    done_before: usize,
+    /// This participant's job's steps, once known.
+    last_total: usize,
 }
 
 /// Why loading the models failed.
@@ -353,6 +368,18 @@ impl Runtime {
                 let saved = self.worker.borrow().save_session();
                 self.post_exported(job, saved);
             }
+            WorkerRequest::SelectParticipant { job, participant } => {
+                let selected = self.worker.borrow_mut().select_participant(&participant);
+                match selected {
+                    Ok(selected) => {
+                        self.post(Event::Imported { job, summary: selected.session });
+                        if let Some((summary, scene)) = selected.reconstruction {
+                            self.post(Event::Reconstructed { job, scene: JsBytes::copy_from(&scene), summary });
+                        }
+                    }
+                    Err(e) => self.fail(Some(job), ErrorStage::Request, &e),
+                }
+            }
             WorkerRequest::WarmUp => self.prepare_while_idle().await,
             WorkerRequest::Cancel { .. } | WorkerRequest::PanicForTest | WorkerRequest::LiveLookahead { .. } => {}
         }
@@ -401,17 +428,78 @@ impl Runtime {
     }
 
     async fn reconstruct_job(&self, job: JobId, overlay: bool) {
+        let participants = self.worker.borrow().participants_to_reconstruct();
+        if participants.is_empty() {
+            if let Some(summary) = self.reconstruct_open_session(job, overlay).await {
+                let scene = self.worker.borrow().scene_json();
+                match scene {
+                    Ok(scene) => self.post(Event::Reconstructed { job, scene: JsBytes::copy_from(&scene), summary }),
+                    Err(e) => self.fail(Some(job), ErrorStage::Reconstruct, &e),
+                }
+            }
+            return;
+        }
+        // A capture of several participants: the association once, then everyone in turn
+        // (each one's detector step and job), then the one shown with everyone drawn.
+        let shown = self.worker.borrow().session_summary().and_then(|s| s.participant);
+        let associated = self.worker.borrow_mut().associate_people();
+        if let Err(e) = associated {
+            return self.fail(Some(job), ErrorStage::Reconstruct, &e);
+        }
+        let count = participants.len();
+        for (k, id) in participants.iter().enumerate() {
+            if self.stopped(job) {
+                return;
+            }
+            if let Err(e) = self.worker.borrow_mut().open_participant_for_reconstruction(id) {
+                return self.fail(Some(job), ErrorStage::Reconstruct, &e);
+            }
+            self.progress_scope.replace(Some(ProgressScope {
+                participant: id.clone(),
+                index: k,
+                count,
+                ..self.progress_scope.take().unwrap_or_default()
+            }));
+            let done = self.reconstruct_open_session(job, overlay).await;
+            let scope = self.progress_scope.take().unwrap_or_default();
+            self.progress_scope.replace(Some(ProgressScope {
+                done_before: scope.done_before + scope.last_total,
+                last_total: 0,
+                ..scope
+            }));
+            if done.is_none() {
+                self.progress_scope.replace(None);
+                return;
+            }
+        }
+        self.progress_scope.replace(None);
+        let shown_again = shown.map_or(Ok(()), |id| self.worker.borrow_mut().open_participant_for_reconstruction(&id));
+        let result =
+            shown_again.and_then(|()| self.worker.borrow_mut().show_group()?.ok_or(WorkerError::NoReconstruction));
+        match result {
+            Ok((summary, scene)) => self.post(Event::Reconstructed { job, scene: JsBytes::copy_from(&scene), summary }),
+            Err(e) => self.fail(Some(job), ErrorStage::Reconstruct, &e),
+        }
+    }
+
+    /// Reconstructs the open session (the detector step first where it needs one); the
+    /// summary, or `None` when it failed (reported) or was cancelled.
+    async fn reconstruct_open_session(&self, job: JobId, overlay: bool) -> Option<ReconstructionSummary> {
         // Observers with video and no keypoints: the detector step first.
         match self.detect_keypoints(job).await {
             Ok(true) => {}
             Ok(false) => {
                 self.stopped(job);
-                return;
+                return None;
             }
             Err(video::DetectFailure::Models(kind, message)) => {
-                return self.post(Event::Error { job: Some(job), stage: ErrorStage::Models, kind, message });
+                self.post(Event::Error { job: Some(job), stage: ErrorStage::Models, kind, message });
+                return None;
             }
-            Err(video::DetectFailure::Worker(e)) => return self.fail(Some(job), ErrorStage::Reconstruct, &e),
+            Err(video::DetectFailure::Worker(e)) => {
+                self.fail(Some(job), ErrorStage::Reconstruct, &e);
+                return None;
+            }
         }
         let frames = self.worker.borrow().aligned_session().map_or(0, |a| a.timeline.frames);
         if frames >= POOL_EAGER_FRAMES {
@@ -425,7 +513,10 @@ impl Runtime {
         };
         let mut task = match started {
             Ok(task) => task,
-            Err(e) => return self.fail(Some(job), ErrorStage::Reconstruct, &e),
+            Err(e) => {
+                self.fail(Some(job), ErrorStage::Reconstruct, &e);
+                return None;
+            }
         };
         let computed = if helpers.is_empty() || task.chunk_count() < 2 {
             self.reconstruct_here(job, &mut task).await
@@ -434,18 +525,17 @@ impl Runtime {
         };
         match computed {
             Ok(true) => {}
-            Ok(false) => return,
-            Err(e) => return self.fail(Some(job), ErrorStage::Reconstruct, &e),
+            Ok(false) => return None,
+            Err(e) => {
+                self.fail(Some(job), ErrorStage::Reconstruct, &e);
+                return None;
+            }
         }
         if self.stopped(job) {
-            return;
+            return None;
         }
         let finished = self.worker.borrow_mut().finish_reconstruction(task);
-        let result = finished.and_then(|summary| Ok((summary, self.worker.borrow().scene_json()?)));
-        match result {
-            Ok((summary, scene)) => self.post(Event::Reconstructed { job, scene: JsBytes::copy_from(&scene), summary }),
-            Err(e) => self.fail(Some(job), ErrorStage::Reconstruct, &e),
-        }
+        finished.map_err(|e| self.fail(Some(job), ErrorStage::Reconstruct, &e)).ok()
     }
 
     /// Every step of `task` here, one window per step; `Ok(false)` when cancelled.
@@ -464,7 +554,17 @@ impl Runtime {
     }
 
     fn post_progress(&self, job: JobId, p: crate::JobProgress) {
-        self.post(Event::Progress { job, stage: p.stage, label: p.stage.label().into(), done: p.done, total: p.total });
+        // In a capture of several participants, everyone's steps in one count: those done
+        // before this participant, theirs, and an estimate of the rest (as many as theirs
+        // each), so `done` only grows.
+        let scoped = self.progress_scope.borrow_mut().as_mut().map(|scope| {
+            scope.last_total = p.total;
+            let left = scope.count - scope.index - 1;
+            let label = format!("{} · {} ({} of {})", p.stage.label(), scope.participant, scope.index + 1, scope.count);
+            (label, scope.done_before + p.done, scope.done_before + p.total * (1 + left))
+        });
+        let (label, done, total) = scoped.unwrap_or_else(|| (p.stage.label().into(), p.done, p.total));
+        self.post(Event::Progress { job, stage: p.stage, label, done, total });
     }
 
     /// The helpers that may take work: none without a pool or before they are started.

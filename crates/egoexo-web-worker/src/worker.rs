@@ -26,14 +26,16 @@ use egoexo_protocol::worker::{
 };
 use egoexo_session::align::DEFAULT_FPS;
 use egoexo_session::format::{write_egoexo_zip, write_egoexo_zip_with};
-use egoexo_session::import::detect_source;
-use egoexo_session::{
-    AlignError, AlignOptions, FileTree, ImportError, ImportOptions, Imported, Limits, align, import_session,
-};
+use egoexo_session::import::{detect_source, import_capture};
+use egoexo_session::{AlignError, AlignOptions, FileTree, ImportError, ImportOptions, Imported, Limits, align};
 use egoexo_share::{ShareContents, ShareError, ShareManifest};
 use thiserror::Error;
 
 use crate::detection::{DetectionTask, ObserverDetectionJob};
+
+mod group;
+
+pub use group::SelectedParticipant;
 
 /// Everything that can go wrong in the worker. Library errors keep their exact messages
 /// (the importers' name the file, line/field and what was expected).
@@ -73,6 +75,12 @@ pub enum WorkerError {
     Pool(#[from] crate::pool::PoolError),
     #[error(transparent)]
     Detection(#[from] crate::detection::DetectionError),
+    #[error(transparent)]
+    Capture(#[from] egoexo_session::capture::CaptureError),
+    #[error("the open capture has no participant `{0}`")]
+    NoSuchParticipant(String),
+    #[error("participant `{0}` is not reconstructed (the capture has them only as an observer)")]
+    NotReconstructed(String),
 }
 
 impl WorkerError {
@@ -89,7 +97,8 @@ impl WorkerError {
             WorkerError::Share(_) => ErrorKind::ShareInvalid,
             WorkerError::ShareRecording(_) | WorkerError::SaveSession(_) => ErrorKind::Export,
             WorkerError::Live(_) => ErrorKind::Reconstruct,
-            WorkerError::Take(_) => ErrorKind::Import,
+            WorkerError::Take(_) | WorkerError::Capture(_) => ErrorKind::Import,
+            WorkerError::NoSuchParticipant(_) | WorkerError::NotReconstructed(_) => ErrorKind::BadRequest,
             WorkerError::Pool(_) | WorkerError::Detection(_) | WorkerError::NoDetectorLoaded => ErrorKind::Reconstruct,
         }
     }
@@ -116,7 +125,7 @@ struct OpenSession {
 }
 
 /// What is shown: a reconstruction made here, or one opened from a share.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 struct Results {
     /// The session's name (export file names).
     name: String,
@@ -267,6 +276,9 @@ pub struct SessionWorker {
     manifest: Option<Manifest>,
     session: Option<OpenSession>,
     results: Option<Results>,
+    /// A capture of several participants: everyone's results; `session` and `results` are
+    /// the shown participant's.
+    group: Option<group::Group>,
     /// Times each stage of a job when set ([`ReconstructionSummary::timings`]).
     clock: WorkerClock,
 }
@@ -386,18 +398,16 @@ impl SessionWorker {
     }
 
     /// Imports any supported input and aligns it; replaces the open session.
+    /// A capture of several participants opens with the first one to reconstruct shown
+    /// ([`SessionSummary::participants`]).
     pub fn import(&mut self, tree: &FileTree) -> Result<SessionSummary, WorkerError> {
         self.session = None;
         self.results = None;
+        self.group = None;
         let mut timings = StageTimings::default();
         let imported =
-            self.timed(&mut timings, TimedStage::Import, || import_session(tree, &ImportOptions::default()))?;
-        let videos = session_videos(tree, &imported)?;
-        self.open_imported_timed(imported, timings)?;
-        let open = self.session.as_mut().ok_or(WorkerError::NoSession)?;
-        open.videos = videos;
-        open.summary = session_summary(&open.imported, &open.aligned, &open.videos);
-        Ok(open.summary.clone())
+            self.timed(&mut timings, TimedStage::Import, || import_capture(tree, &ImportOptions::default()))?;
+        self.open_capture(Some(tree), imported, timings)
     }
 
     /// Opens a session imported elsewhere (the CLI imports with its own options); replaces
@@ -413,6 +423,7 @@ impl SessionWorker {
     ) -> Result<SessionSummary, WorkerError> {
         self.session = None;
         self.results = None;
+        self.group = None;
         let fps = self.fps();
         let aligned = self.timed(&mut timings, TimedStage::Align, || align_for(&imported, fps))?;
         let videos = BTreeMap::new();
@@ -504,14 +515,29 @@ impl SessionWorker {
         let fps = self.fps();
         let open = self.session.as_mut().ok_or(WorkerError::NoSession)?;
         let mut summaries = Vec::new();
+        let mut found = Vec::new();
         for (o, track, summary) in task.finish() {
             let observer = open.imported.session.observers.get_mut(o).ok_or(WorkerError::NoSession)?;
             observer.keypoints = Some(track);
+            found.push((observer.id.clone(), o));
             summaries.push(summary);
         }
         open.aligned = align_for(&open.imported, fps)?;
         open.summary = session_summary(&open.imported, &open.aligned, &open.videos);
         open.detection = summaries.clone();
+        let mut summary = open.summary.clone();
+        for (id, o) in found {
+            if let Some(track) = self.session.as_ref().and_then(|s| s.imported.session.observers[o].keypoints.clone()) {
+                self.keep_detected_keypoints(&id, &track);
+            }
+        }
+        if let Some(open) = &mut self.session {
+            if let Some(group) = &self.group {
+                summary.participants = group.participants.clone();
+                summary.participant = Some(group.participants[group.selected].id.clone());
+            }
+            open.summary = summary;
+        }
         Ok(summaries)
     }
 
@@ -650,11 +676,14 @@ impl SessionWorker {
         let mut summary = reconstruction_summary(&open.aligned, &ego_exo, ego_only.as_ref(), windows, runs);
         summary.pool = task.pool;
         summary.detection = open.detection.clone();
+        let participant = self.group.as_ref().map(|g| g.scene_participant(g.selected));
         let scene_json = self.timed(&mut timings, TimedStage::Scene, || {
-            let scene = crate::scene::build_scene(&open.aligned, &ego_exo, ego_only.as_ref());
+            let mut scene = crate::scene::build_scene(&open.aligned, &ego_exo, ego_only.as_ref());
+            scene.participant = participant.clone();
             scene.check().map_err(WorkerError::Scene)?;
             serde_json::to_vec(&scene).map_err(|e| WorkerError::Scene(e.to_string()))
         })?;
+        summary.participant = participant.map(|p| p.id);
         timings.merge(&open.timings);
         summary.timings = timings
             .stages
@@ -670,6 +699,7 @@ impl SessionWorker {
             session: open.summary.clone(),
             made_here: Some((ego_exo, ego_only)),
         });
+        self.store_participant_results();
         Ok(summary)
     }
 
@@ -677,7 +707,31 @@ impl SessionWorker {
     /// step, [`SessionWorker::finish_reconstruction`]). `progress` is called after every
     /// window of every pass; returning `false` cancels ([`InferError::Cancelled`]) and keeps no
     /// result.
+    /// A capture of several participants: everyone in turn (after the association), the
+    /// shown participant's summary returned (with everyone's rows).
     pub fn reconstruct(
+        &mut self,
+        ego_only_overlay: bool,
+        progress: &mut dyn FnMut(JobProgress) -> bool,
+    ) -> Result<ReconstructionSummary, WorkerError> {
+        let participants = self.participants_to_reconstruct();
+        if !participants.is_empty() {
+            let shown = self.session_summary().and_then(|s| s.participant);
+            self.associate_people()?;
+            for id in &participants {
+                self.open_participant_for_reconstruction(id)?;
+                self.reconstruct_open_session(ego_only_overlay, progress)?;
+            }
+            if let Some(id) = shown {
+                self.open_participant_for_reconstruction(&id)?;
+            }
+            let (summary, _) = self.show_group()?.ok_or(WorkerError::NoReconstruction)?;
+            return Ok(summary);
+        }
+        self.reconstruct_open_session(ego_only_overlay, progress)
+    }
+
+    fn reconstruct_open_session(
         &mut self,
         ego_only_overlay: bool,
         progress: &mut dyn FnMut(JobProgress) -> bool,
@@ -712,6 +766,19 @@ impl SessionWorker {
         take: &egoexo_session::live::LiveTake,
         name: &str,
     ) -> Result<SessionSummary, WorkerError> {
+        if take.wearers().len() > 1 {
+            // Several wearers: the take is a capture of them all, opened like a dropped one.
+            let (capture, warnings) = take.to_capture(name)?;
+            self.session = None;
+            self.results = None;
+            self.group = None;
+            let imported = egoexo_session::import::ImportedCapture {
+                capture,
+                source: egoexo_session::SourceKind::Egoexo,
+                warnings,
+            };
+            return self.open_capture(None, imported, StageTimings::default());
+        }
         let (session, warnings) = take.to_session(name, None)?;
         self.open_imported(Imported { session, source: egoexo_session::SourceKind::Egoexo, warnings })
     }
@@ -719,17 +786,20 @@ impl SessionWorker {
     /// The open session as a `.egoexo` file.
     pub fn save_session(&self) -> Result<ExportedFile, WorkerError> {
         let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
+        // A capture of several participants is saved whole (version 3), with every keypoint
+        // the detector step found.
+        if let (Some(capture), Some(name)) = (self.capture_egoexo(true), self.capture_name()) {
+            return Ok(ExportedFile {
+                bytes: capture?,
+                file_name: format!("{}.egoexo", file_name(&name)),
+                mime_type: "application/zip",
+            });
+        }
         // The observers' videos go with it: a saved session opens again as it was.
         let videos = open.videos.iter().map(|(path, bytes)| (path.clone(), bytes.to_vec())).collect();
         let bytes = write_egoexo_zip_with(&open.imported.session, videos)
             .map_err(|e| WorkerError::SaveSession(e.to_string()))?;
-        let name: String = open
-            .imported
-            .session
-            .name
-            .chars()
-            .map(|c| if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') { c } else { '_' })
-            .collect();
+        let name = file_name(&open.imported.session.name);
         Ok(ExportedFile { bytes, file_name: format!("{name}.egoexo"), mime_type: "application/zip" })
     }
 
@@ -760,7 +830,7 @@ impl SessionWorker {
         let bytes = egoexo_motion_io::write(format, &results.motion)?;
         Ok(ExportedFile {
             bytes,
-            file_name: format!("{}-{}.{}", results.name, results.method, format.extension()),
+            file_name: format!("{}-{}.{}", file_name(&results.name), results.method, format.extension()),
             mime_type: format.mime_type(),
         })
     }
@@ -771,6 +841,9 @@ impl SessionWorker {
     pub fn pack_share(&self, include_recording: bool, created_by: &str) -> Result<Vec<u8>, WorkerError> {
         let results = self.results.as_ref().ok_or(WorkerError::NoReconstruction)?;
         let session_egoexo = match (&self.session, include_recording) {
+            (Some(_), true) if self.capture_name().is_some() => {
+                self.capture_egoexo(false).transpose().map_err(|e| WorkerError::ShareRecording(e.to_string()))?
+            }
             (Some(open), true) => {
                 Some(write_egoexo_zip(&open.imported.session).map_err(|e| WorkerError::ShareRecording(e.to_string()))?)
             }
@@ -781,6 +854,7 @@ impl SessionWorker {
             scene_json: results.scene_json.clone(),
             motion: results.motion.clone(),
             session_egoexo,
+            participants: self.shared_participants(),
         };
         Ok(egoexo_share::pack(&contents)?)
     }
@@ -797,6 +871,7 @@ impl SessionWorker {
         let contents = egoexo_share::unpack(container)?;
         self.results = None;
         self.session = None;
+        self.group = None;
         if let Some(recording) = contents.session_egoexo {
             let name = format!("{}.egoexo", contents.manifest.name);
             self.import(&FileTree::from_zip(name, recording, Limits::default())?)?;
@@ -811,6 +886,16 @@ impl SessionWorker {
             session: manifest.session.clone(),
             made_here: None,
         });
+        let shown = manifest.summary.participant.clone();
+        self.open_shared_participants(contents.participants, shown.as_deref())?;
+        if let Some(id) = &shown
+            && self.session.is_some()
+        {
+            // The recording opened as a capture: its session is the shown participant's.
+            let results = self.results.clone();
+            self.open_participant_for_reconstruction(id)?;
+            self.results = results;
+        }
         Ok(OpenedShare { manifest, scene_json: contents.scene_json })
     }
 }
@@ -917,6 +1002,8 @@ fn session_summary(
         observers,
         ground_truth: aligned.ground_truth.is_some(),
         warnings,
+        participants: Vec::new(),
+        participant: None,
     }
 }
 
@@ -971,5 +1058,13 @@ fn reconstruction_summary(
         timings: Vec::new(),
         pool: None,
         detection: Vec::new(),
+        participant: None,
+        participants: Vec::new(),
+        association: Vec::new(),
     }
+}
+
+/// `name` as a file name: letters, digits, `-`, `_` and `.` kept, anything else `_`.
+fn file_name(name: &str) -> String {
+    name.chars().map(|c| if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') { c } else { '_' }).collect()
 }

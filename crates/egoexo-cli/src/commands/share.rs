@@ -140,8 +140,28 @@ fn reshare(folder: &std::path::Path, include_recording: bool) -> Result<(Vec<u8>
         manifest.summary.method,
         if session_egoexo.is_some() { ", with the recording" } else { "" }
     );
-    let contents =
-        egoexo_share::ShareContents { manifest, scene_json: read(container::SCENE_FILE)?, motion, session_egoexo };
+    // A capture's participants: each one's scene and motion under `participants/<id>/`.
+    let mut participants = Vec::new();
+    for entry in &manifest.participants {
+        let id = &entry.participant.id;
+        let motion: egoexo_core::SmplMotion =
+            serde_json::from_slice(&read(&container::participant_entry(id, container::MOTION_FILE)?)?)
+                .with_context(|| format!("{}: participant `{id}`'s motion", folder.display()))?;
+        participants.push(egoexo_share::SharedParticipant {
+            summary: entry.participant.clone(),
+            reconstruction: entry.summary.clone(),
+            session: entry.session.clone(),
+            scene_json: read(&container::participant_entry(id, container::SCENE_FILE)?)?,
+            motion,
+        });
+    }
+    let contents = egoexo_share::ShareContents {
+        manifest,
+        scene_json: read(container::SCENE_FILE)?,
+        motion,
+        session_egoexo,
+        participants,
+    };
     Ok((egoexo_share::pack(&contents)?, what))
 }
 
@@ -215,8 +235,30 @@ fn run_get(args: GetArgs) -> Result<()> {
         let file = worker.export(format)?;
         files.push((file.file_name, file.bytes));
     }
+    // A capture: every participant's scene, motion and exports (the exports named by them).
+    for p in &contents.participants {
+        let id = &p.summary.id;
+        files.push((
+            egoexo_share::container::participant_entry(id, egoexo_share::container::SCENE_FILE)?,
+            p.scene_json.clone(),
+        ));
+        files.push((
+            egoexo_share::container::participant_entry(id, egoexo_share::container::MOTION_FILE)?,
+            serde_json::to_vec(&p.motion)?,
+        ));
+        if Some(id) != opened.manifest.summary.participant.as_ref() {
+            worker.select_participant(id)?;
+            for format in ExportFormat::ALL {
+                let file = worker.export(format)?;
+                files.push((file.file_name, file.bytes));
+            }
+        }
+    }
     for (name, bytes) in &files {
         let path = args.output.join(name);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
+        }
         if path.exists() && !args.force {
             bail!("{} exists; pass --force to replace it", path.display());
         }

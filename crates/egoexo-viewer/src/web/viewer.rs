@@ -352,6 +352,13 @@ struct Animation {
 }
 
 /// The egoexo 3D view on a canvas. See the crate docs for the JS API.
+/// The CSS colour the viewer draws participant colour `index` in (a capture's participants,
+/// `ParticipantSummary::colour`), for the page's legend.
+#[wasm_bindgen]
+pub fn participant_colour(index: usize) -> String {
+    crate::colors::css(crate::colors::participant_colour(index))
+}
+
 #[wasm_bindgen]
 pub struct Viewer {
     state: Rc<RefCell<State>>,
@@ -885,6 +892,14 @@ impl Viewer {
     /// The timeline plots' rows for the scene: `{ rows: [{ kind, label, top, height, index }],
     /// height, error_max_cm }` in pixels from the plots' top (no rows without a scene or its
     /// timeline data).
+    /// A capture's participants in the scene: `[{id, colour, shown}]` — the one shown (drawn in
+    /// side colours) first, then the others (drawn in `colour`, a CSS colour); empty for a
+    /// one-wearer scene.
+    pub fn participants(&self) -> Result<JsValue, JsError> {
+        let list = self.read(|s| s.scene.as_ref().map(crate::scene::participant_legend).unwrap_or_default());
+        serde_wasm_bindgen::to_value(&list).map_err(|e| JsError::new(&e.to_string()))
+    }
+
     pub fn plot_layout(&self) -> Result<JsValue, JsError> {
         let layout = self.read(|s| s.scene.as_ref().map(PlotLayout::of));
         let layout = layout.unwrap_or(PlotLayout { rows: Vec::new(), height: 0, error_max_cm: 0.0 });

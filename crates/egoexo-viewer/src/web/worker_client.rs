@@ -133,6 +133,14 @@ impl WorkerClient {
         Ok(job)
     }
 
+    /// Shows participant `id` of the open capture (answered by `reconstructed` when there is a
+    /// reconstruction, else `imported`). Returns the job number.
+    pub fn select_participant(&mut self, id: String) -> Result<JobId, JsError> {
+        let job = self.next_job();
+        self.send(&Request::SelectParticipant { job, participant: id })?;
+        Ok(job)
+    }
+
     /// Cancels the current job; its events from now on are dropped by [`Self::receive`].
     /// Returns its number, if there was one.
     pub fn cancel(&mut self) -> Result<Option<JobId>, JsError> {

@@ -178,9 +178,13 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
     live.modes.add(info.method);
     const who = info.exo_observers.length > 0 ? ` (rays from ${info.exo_observers.join(', ')})` : '';
     const networks = info.trained_for_lookahead ? ` · networks trained for lookahead ${info.lookahead}` : '';
+    // A room of several wearers: everyone is drawn; the facts are the first wearer's.
+    const wearers = info.wearers ?? [];
+    const everyone = wearers.length > 1 ? ` · ${wearers.length} wearers drawn (${wearers.join(', ')}; facts of ${wearers[0]})` : '';
     $('live-mode').textContent = (!info.tracked ? 'the wearer is not tracked'
       : info.method === 'ego-only' ? 'ego-only: no observer sees the wearer now (none connected, or no keypoints)'
-        : `ego-exo${who}`) + networks;
+        : `ego-exo${who}`) + networks + everyone;
+    $('live-mode').dataset.wearers = String(Math.max(1, wearers.length));
     $('live-mode').dataset.method = info.method;
     $('live-mode').dataset.trainedForLookahead = String(info.trained_for_lookahead);
     // Latency: when the frame reached the page, and when it is on screen (the viewer draws in

@@ -7,8 +7,10 @@
 // was sent and reconstructs offline. A second page joins late by the watch link.
 
 import assert from 'node:assert/strict';
-import { spawn } from 'node:child_process';
-import { readFileSync } from 'node:fs';
+import { execFileSync, spawn } from 'node:child_process';
+import { mkdtempSync, readFileSync, rmSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join } from 'node:path';
 import { after, before, describe, test } from 'node:test';
 
 import { APP_URL, decodePng, launch, openApp, skeletonPixels } from './browser.mjs';
@@ -171,5 +173,42 @@ describe('live capture', () => {
     assert.deepEqual(watcher.errors, []);
     await watcher.close();
     await app.close();
+  });
+
+  test('a room of two wearers: both are drawn live, and the kept take reconstructs both', async () => {
+    const dir = mkdtempSync(join(tmpdir(), 'egoexo-live-pair-'));
+    const pair = join(dir, 'pair.egoexo');
+    // Two participants, each one's glasses streaming their keypoints of the other.
+    execFileSync(EGOEXO, ['walk', '--seconds', '14', '--participants', '2', '--identities', '-o', pair], { stdio: ['ignore', 'ignore', 'inherit'] });
+    const app = await openApp(browser, '?backend=webgl2');
+    try {
+      assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
+      await app.page.getByRole('button', { name: 'Go live' }).click();
+      await app.page.waitForSelector('#live-room[data-code]');
+      const code = await app.page.getAttribute('#live-room', 'data-code');
+      await app.waitState('live');
+      const replay = egoexo(['live', 'replay', pair, '--url', APP_URL, '--room', code, '--duration-s', '12']);
+      const shown = await waitFor(app, (l) => l.frames >= 20 && (l.lastFrame?.wearers ?? []).length === 2, 'frames of both wearers');
+      assert.deepEqual(shown.lastFrame.wearers, ['participant-1', 'participant-2']);
+      const scene = await app.page.evaluate(() => JSON.parse(new TextDecoder().decode(window.egoexo.live.scene)));
+      assert.equal(scene.participant.id, 'participant-1');
+      assert.deepEqual(scene.others.map((o) => o.participant.id), ['participant-2']);
+      assert.match(await app.text('#live-mode'), /2 wearers drawn/);
+      const devices = (await waitFor(app, (l) => l.devices.length === 4, 'four devices')).devices.map((d) => d.device).sort();
+      assert.deepEqual(devices, ['participant-1', 'participant-1-sees-participant-2', 'participant-2', 'participant-2-sees-participant-1']);
+      await replay;
+      await new Promise((r) => setTimeout(r, 1500));
+      await app.page.getByRole('button', { name: 'Stop and keep' }).click();
+      assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
+      // The take is a capture of both: everyone reconstructed offline, each one selectable.
+      assert.deepEqual(await app.page.locator('#participants button').allTextContents(), ['participant-1', 'participant-2']);
+      const summary = await app.page.evaluate(() => window.egoexo.summary);
+      assert.deepEqual(summary.participants.map((p) => p.id), ['participant-1', 'participant-2']);
+      assert.ok(summary.participants.every((p) => p.valid_frames > 300), JSON.stringify(summary.participants));
+      assert.deepEqual(app.errors, []);
+    } finally {
+      await app.close();
+      rmSync(dir, { recursive: true, force: true });
+    }
   });
 });

@@ -8,13 +8,11 @@
 use egoexo_core::TrackingMode;
 use egoexo_core::aligned::AlignedSession;
 use egoexo_core::association::AssociationOptions;
-use egoexo_core::exo_keypoints::COCO17_COUNT;
 use egoexo_detect::people::{CoarseParticipant, associate_views};
 use egoexo_infer::{Engine, Method, ReconstructOptions, Reconstruction};
-use egoexo_session::capture::{Capture, View, ViewPeople};
-use egoexo_session::model::KeypointTrack;
+use egoexo_session::capture::Capture;
 use egoexo_session::{AlignOptions, align};
-use egoexo_synth::group::{GroupConfig, SimulatedCapture, group_walk, simulate_group};
+use egoexo_synth::group::{GroupConfig, group_walk, simulate_group};
 use serde::{Deserialize, Serialize};
 
 use crate::DatasetError;
@@ -71,41 +69,6 @@ pub struct ParticipantRow {
 pub struct GroupReport {
     pub association: Vec<AssociationRow>,
     pub participants: Vec<ParticipantRow>,
-}
-
-/// The capture with every view assigned by the simulator's own identities (perfect
-/// association).
-pub fn with_true_identities(sim: &SimulatedCapture) -> Capture {
-    let mut capture = sim.capture.clone();
-    let mut views = Vec::new();
-    for (view, identities) in sim.capture.views.iter().zip(&sim.identities) {
-        let ViewPeople::Unassigned(people) = &view.people else {
-            views.push(view.clone());
-            continue;
-        };
-        for (q, participant) in sim.capture.participants.iter().enumerate() {
-            if participant.id == view.observer {
-                continue;
-            }
-            let frames = people
-                .frames
-                .iter()
-                .zip(identities)
-                .map(|(detections, who)| {
-                    who.iter().position(|w| *w == Some(q)).map_or([None; COCO17_COUNT], |d| detections[d])
-                })
-                .collect();
-            views.push(View {
-                observer: view.observer.clone(),
-                people: ViewPeople::Assigned {
-                    target: participant.id.clone(),
-                    keypoints: KeypointTrack { timestamps_ns: people.timestamps_ns.clone(), frames },
-                },
-            });
-        }
-    }
-    capture.views = views;
-    capture
 }
 
 fn aligned_session(capture: &Capture, participant: usize) -> Result<AlignedSession, DatasetError> {
@@ -180,7 +143,7 @@ pub fn evaluate_group(
         report.association.push(row);
 
         // Each participant: ego-only, with the associated keypoints, with the true identities.
-        let truth = with_true_identities(&sim);
+        let truth = sim.with_true_identities();
         for p in 0..n {
             let ego_only = reconstruct(engine, &aligned[p], Method::EgoOnly)?;
             let associated = aligned_session(&capture, p)?;

@@ -166,6 +166,11 @@ pub struct DeviceHello {
     pub role: DeviceRole,
     /// What it will publish.
     pub streams: Vec<Stream>,
+    /// An observer in a room of several wearers: the wearer (their device id) whose keypoints
+    /// it publishes. Absent: the room's only wearer. Only observers name one. (Added within
+    /// version 1: a relay that predates it ignores it.)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target: Option<String>,
 }
 
 /// Client → relay (JSON text frames).
@@ -190,6 +195,9 @@ pub struct ChannelInfo {
     pub device: String,
     pub role: DeviceRole,
     pub stream: Stream,
+    /// The observer's target wearer ([`DeviceHello::target`]), when it names one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target: Option<String>,
 }
 
 /// A device, as the relay sees it.
@@ -720,7 +728,12 @@ mod tests {
         let hello = ClientMessage::Hello {
             protocol: LIVE_PROTOCOL_VERSION,
             join: Join::Code { code: "7KQ-M4T".into() },
-            device: Some(DeviceHello { id: "wearer".into(), role: DeviceRole::Wearer, streams: vec![Stream::Head] }),
+            device: Some(DeviceHello {
+                id: "wearer".into(),
+                role: DeviceRole::Wearer,
+                streams: vec![Stream::Head],
+                target: None,
+            }),
         };
         let json = serde_json::to_value(&hello).unwrap();
         assert_eq!(

@@ -246,7 +246,7 @@ fn device_hello(join: Join, id: &str, role: DeviceRole, streams: &[Stream]) -> C
     ClientMessage::Hello {
         protocol: LIVE_PROTOCOL_VERSION,
         join,
-        device: Some(DeviceHello { id: id.into(), role, streams: streams.to_vec() }),
+        device: Some(DeviceHello { id: id.into(), role, streams: streams.to_vec(), target: None }),
     }
 }
 
@@ -496,16 +496,29 @@ async fn hostile_clients_are_closed_with_a_reason_and_the_others_carry_on() {
         assert_eq!(c, code(kind), "{id}: {reason}");
         assert!(reason.contains(needle), "{id}: {reason}");
     }
-    // The wearer's head belongs to `wearer`: another device may not publish it.
-    let mut usurper = Client::connect(
+    // Several wearers share a room (a capture of several participants): a second one is in.
+    let mut second = Client::connect(
         relay.addr,
         device_hello(device_join(&room), "wearer-2", DeviceRole::Wearer, &[Stream::Head]),
         0,
         true,
     )
     .await;
-    let (c, reason) = usurper.closed().await;
-    assert_eq!(c, code(CloseKind::NotAllowed), "{reason}");
+    second.welcome().await;
+    drop(second);
+    // Only an observer names the wearer it sees, and never itself.
+    for (id, role, target) in
+        [("wearer-3", DeviceRole::Wearer, "wearer"), ("observer-9", DeviceRole::Observer, "observer-9")]
+    {
+        let hello = ClientMessage::Hello {
+            protocol: LIVE_PROTOCOL_VERSION,
+            join: device_join(&room),
+            device: Some(DeviceHello { id: id.into(), role, streams: vec![Stream::Head], target: Some(target.into()) }),
+        };
+        let (c, reason) = Client::connect(relay.addr, hello, 0, true).await.closed().await;
+        assert_eq!(c, code(CloseKind::BadHello), "{id}: {reason}");
+        assert!(reason.contains("target"), "{id}: {reason}");
+    }
     // No hello, a hello for another version, an unknown room, wrong codes until rate-limited.
     let mut silent =
         Client::start(socket(relay.addr).await, ClientMessage::Pong { relay_ns: 0, device_ns: 0 }, 0, true).await;

@@ -6,6 +6,12 @@
 //! A pose a device sent as invalid (tracking lost) is left out, so alignment sees a gap and
 //! marks those frames invalid; a stale pose is never repeated. Frames that arrive twice (the
 //! history a viewer gets again when it reconnects) are kept once.
+//!
+//! A room may hold several wearers (a capture of several participants): each is a session of
+//! its own ([`LiveTake::to_session_of`]) with the observers that name them as their target
+//! (an observer naming none belongs to the room's only wearer), and the whole take is a
+//! [`Capture`] ([`LiveTake::to_capture`]). The frame grid runs from the *first* wearer's (by
+//! id) first head pose.
 
 use std::collections::BTreeMap;
 use std::ops::RangeInclusive;
@@ -13,8 +19,9 @@ use std::ops::RangeInclusive;
 use egoexo_core::camera::CameraCalibration;
 use egoexo_core::exo_keypoints::{COCO17_COUNT, Keypoint2d};
 use egoexo_core::rigid::RigidTransform;
-use egoexo_protocol::live::{ChannelInfo, DataFrame, DeviceRole, FramePayload, Stream};
+use egoexo_protocol::live::{ChannelInfo, DataFrame, DeviceHello, DeviceRole, FramePayload, Stream, valid_device_id};
 
+use crate::capture::{Capture, CaptureError, Participant, View, ViewPeople};
 use crate::model::{KeypointTrack, Observer, Session, SubjectInfo, Trajectory, Wearer, WristSource};
 use crate::validate::validate_session;
 use crate::{ImportError, ImportWarning};
@@ -52,12 +59,101 @@ pub enum TakeError {
     NoWearerHead(String),
     #[error("the take is not a valid session: {0}")]
     Invalid(#[from] ImportError),
+    #[error("no wearer `{0}` in the take")]
+    NoSuchWearer(String),
+    #[error("the take is not a valid capture: {0}")]
+    Capture(#[from] CaptureError),
+    #[error("`{0}` is not a live device id (1–64 of A–Z a–z 0–9 . _ -)")]
+    DeviceId(String),
+}
+
+/// One device of a capture as it streams into a live room ([`capture_devices`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CaptureDevice {
+    pub hello: DeviceHello,
+    /// An observer's camera (sent as its calibration).
+    pub camera: Option<CameraCalibration>,
+    /// Its pose streams.
+    pub poses: Vec<(Stream, Trajectory)>,
+    /// An observer's keypoints (of its target).
+    pub keypoints: Option<KeypointTrack>,
+}
+
+/// A capture's devices as they stream into a live room (what [`LiveTake::to_capture`] reads
+/// back): every participant to reconstruct a wearer under their id (`head`, and the wrists
+/// they have); every camera's keypoints of a participant an observer `<camera>-sees-<target>`
+/// that names its target (the camera's head, calibration and those keypoints). A capture of
+/// one participant to reconstruct keeps the observers' own ids and names no target (a room
+/// of one wearer). Views of people without identity are left out: a live observer streams one
+/// person's keypoints.
+pub fn capture_devices(capture: &Capture) -> Result<Vec<CaptureDevice>, TakeError> {
+    let one_wearer = capture.reconstructed().count() == 1;
+    let mut devices = Vec::new();
+    for p in capture.participants.iter().filter(|p| p.reconstruct) {
+        let mut poses = vec![(Stream::Head, p.head.clone())];
+        poses.extend(p.left_wrist.clone().map(|w| (Stream::LeftWrist, w)));
+        poses.extend(p.right_wrist.clone().map(|w| (Stream::RightWrist, w)));
+        devices.push(CaptureDevice {
+            hello: DeviceHello {
+                id: p.id.clone(),
+                role: DeviceRole::Wearer,
+                streams: poses.iter().map(|(s, _)| *s).collect(),
+                target: None,
+            },
+            camera: None,
+            poses,
+            keypoints: None,
+        });
+    }
+    // A room of one wearer: cameras that see nobody yet still stream their pose (as a
+    // recording's observers without keypoints do).
+    for p in capture.participants.iter().filter(|p| one_wearer && !p.reconstruct) {
+        let (Some(calibration), false) = (p.camera, capture.views.iter().any(|v| v.observer == p.id)) else { continue };
+        devices.push(CaptureDevice {
+            hello: DeviceHello {
+                id: p.id.clone(),
+                role: DeviceRole::Observer,
+                streams: vec![Stream::Head],
+                target: None,
+            },
+            camera: Some(calibration),
+            poses: vec![(Stream::Head, p.head.clone())],
+            keypoints: None,
+        });
+    }
+    for view in &capture.views {
+        let ViewPeople::Assigned { target, keypoints } = &view.people else { continue };
+        let Some(camera) = capture.participants.iter().find(|p| p.id == view.observer) else { continue };
+        let Some(calibration) = camera.camera else { continue };
+        let (id, target) = if one_wearer {
+            (view.observer.clone(), None)
+        } else {
+            (format!("{}-sees-{target}", view.observer), Some(target.clone()))
+        };
+        devices.push(CaptureDevice {
+            hello: DeviceHello {
+                id,
+                role: DeviceRole::Observer,
+                streams: vec![Stream::Head, Stream::Keypoints],
+                target,
+            },
+            camera: Some(calibration),
+            poses: vec![(Stream::Head, camera.head.clone())],
+            keypoints: Some(keypoints.clone()),
+        });
+    }
+    if let Some(bad) = devices.iter().find(|d| !valid_device_id(&d.hello.id)) {
+        return Err(TakeError::DeviceId(bad.hello.id.clone()));
+    }
+    Ok(devices)
 }
 
 /// One device's streams.
 #[derive(Debug, Default)]
 struct DeviceTake {
     role: Option<DeviceRole>,
+    /// An observer's target wearer, when it names one.
+    target: Option<String>,
     poses: BTreeMap<Stream, BTreeMap<i64, Option<RigidTransform>>>,
     keypoints: BTreeMap<i64, Keypoints>,
     camera: Option<CameraCalibration>,
@@ -80,7 +176,9 @@ impl LiveTake {
     pub fn set_channels(&mut self, channels: &[ChannelInfo]) {
         for channel in channels {
             self.channels.insert(channel.channel, channel.clone());
-            self.devices.entry(channel.device.clone()).or_default().role = Some(channel.role);
+            let device = self.devices.entry(channel.device.clone()).or_default();
+            device.role = Some(channel.role);
+            device.target.clone_from(&channel.target);
         }
     }
 
@@ -125,13 +223,25 @@ impl LiveTake {
         self.stats
     }
 
-    fn wearer_stream(&self, stream: Stream) -> Option<&BTreeMap<i64, Option<RigidTransform>>> {
-        self.devices.values().filter(|d| d.role == Some(DeviceRole::Wearer)).find_map(|d| d.poses.get(&stream))
+    /// The wearers whose head has streamed, by device id (the first one's head is the
+    /// take's frame grid).
+    pub fn wearers(&self) -> Vec<String> {
+        self.devices
+            .iter()
+            .filter(|(_, d)| {
+                d.role == Some(DeviceRole::Wearer) && d.poses.get(&Stream::Head).is_some_and(|h| !h.is_empty())
+            })
+            .map(|(id, _)| id.clone())
+            .collect()
     }
 
-    /// First and last time of the wearer's head stream (relay clock, ns).
+    fn wearer_stream(&self, wearer: &str, stream: Stream) -> Option<&BTreeMap<i64, Option<RigidTransform>>> {
+        self.devices.get(wearer).filter(|d| d.role == Some(DeviceRole::Wearer)).and_then(|d| d.poses.get(&stream))
+    }
+
+    /// First and last time of the (first) wearer's head stream (relay clock, ns).
     pub fn head_range_ns(&self) -> Option<(i64, i64)> {
-        let head = self.wearer_stream(Stream::Head)?;
+        let head = self.wearer_stream(self.wearers().first()?, Stream::Head)?;
         Some((*head.keys().next()?, *head.keys().next_back()?))
     }
 
@@ -158,26 +268,47 @@ impl LiveTake {
         name: &str,
         range: Option<RangeInclusive<i64>>,
     ) -> Result<(Session, Vec<ImportWarning>), TakeError> {
+        match self.wearers().first() {
+            Some(wearer) => self.to_session_of(wearer, name, range),
+            None => Err(TakeError::NoWearerHead(name.to_string())),
+        }
+    }
+
+    /// Wearer `wearer`'s part of the take as a session: their head and wrists, and the
+    /// observers that see them (those naming them as their target; in a room of one wearer,
+    /// also those naming nobody).
+    pub fn to_session_of(
+        &self,
+        wearer: &str,
+        name: &str,
+        range: Option<RangeInclusive<i64>>,
+    ) -> Result<(Session, Vec<ImportWarning>), TakeError> {
+        if self.devices.get(wearer).is_none_or(|d| d.role != Some(DeviceRole::Wearer)) {
+            return Err(TakeError::NoSuchWearer(wearer.to_string()));
+        }
         let range = range.unwrap_or(i64::MIN..=i64::MAX);
-        let trajectory = |poses: &BTreeMap<i64, Option<RigidTransform>>| {
-            let mut t = Trajectory::default();
-            for (&ts, pose) in poses.range(range.clone()) {
-                if let Some(pose) = pose {
-                    t.timestamps_ns.push(ts);
-                    t.poses.push(*pose);
-                }
-            }
-            t
-        };
-        let head = self.wearer_stream(Stream::Head).map(trajectory).unwrap_or_default();
+        let trajectory = |poses: &BTreeMap<i64, Option<RigidTransform>>| trajectory_in(poses, &range);
+        let head = self.wearer_stream(wearer, Stream::Head).map(trajectory).unwrap_or_default();
         if head.is_empty() {
             return Err(TakeError::NoWearerHead(name.to_string()));
         }
         // A wrist needs two samples to be interpolated at all.
-        let wrist = |stream| self.wearer_stream(stream).map(trajectory).filter(|t| t.len() >= 2);
+        let wrist = |stream| self.wearer_stream(wearer, stream).map(trajectory).filter(|t| t.len() >= 2);
+        let several = self.wearers().len() > 1;
         let mut warnings = Vec::new();
         let mut observers = Vec::new();
         for (id, device) in self.devices.iter().filter(|(_, d)| d.role == Some(DeviceRole::Observer)) {
+            match &device.target {
+                Some(target) if target != wearer => continue,
+                None if several => {
+                    warnings.push(ImportWarning {
+                        file: format!("observers/{id}"),
+                        message: "names no target wearer in a room of several; left out".into(),
+                    });
+                    continue;
+                }
+                _ => {}
+            }
             let head = device.poses.get(&Stream::Head).map(trajectory).unwrap_or_default();
             let Some(camera) = device.camera else {
                 warnings.push(ImportWarning {
@@ -220,6 +351,84 @@ impl LiveTake {
         warnings.extend(validate_session(&session)?);
         Ok((session, warnings))
     }
+
+    /// The whole take as a capture named `name`: every wearer a participant to reconstruct,
+    /// every observer with a camera and a head a participant seen only through their camera,
+    /// whose keypoints are a view of their target wearer (or of the only wearer).
+    pub fn to_capture(&self, name: &str) -> Result<(Capture, Vec<ImportWarning>), TakeError> {
+        let wearers = self.wearers();
+        if wearers.is_empty() {
+            return Err(TakeError::NoWearerHead(name.to_string()));
+        }
+        let all = i64::MIN..=i64::MAX;
+        let mut warnings = Vec::new();
+        let mut participants = Vec::new();
+        for id in &wearers {
+            let (session, found) = self.to_session_of(id, name, None)?;
+            warnings.extend(found.into_iter().filter(|w| !warnings.contains(w)).collect::<Vec<_>>());
+            let w = session.wearer;
+            participants.push(Participant {
+                id: id.clone(),
+                reconstruct: true,
+                head: w.head,
+                left_wrist: w.left_wrist,
+                right_wrist: w.right_wrist,
+                wrist_source: w.wrist_source,
+                head_joint_in_device: w.head_joint_in_device,
+                camera: None,
+                video: None,
+                context_features: None,
+                subject: SubjectInfo::default(),
+                ground_truth: None,
+            });
+        }
+        let mut views = Vec::new();
+        for (id, device) in self.devices.iter().filter(|(_, d)| d.role == Some(DeviceRole::Observer)) {
+            let head = device.poses.get(&Stream::Head).map(|p| trajectory_in(p, &all)).unwrap_or_default();
+            let (Some(camera), false) = (device.camera, head.is_empty()) else { continue };
+            let target = match &device.target {
+                Some(target) if wearers.contains(target) => target.clone(),
+                None if wearers.len() == 1 => wearers[0].clone(),
+                _ => continue,
+            };
+            participants.push(Participant {
+                id: id.clone(),
+                reconstruct: false,
+                head,
+                left_wrist: None,
+                right_wrist: None,
+                wrist_source: WristSource::Devices,
+                head_joint_in_device: egoexo_core::skeleton::DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE,
+                camera: Some(camera),
+                video: None,
+                context_features: None,
+                subject: SubjectInfo::default(),
+                ground_truth: None,
+            });
+            if !device.keypoints.is_empty() {
+                let keypoints = KeypointTrack {
+                    timestamps_ns: device.keypoints.keys().copied().collect(),
+                    frames: device.keypoints.values().copied().collect(),
+                };
+                views.push(View { observer: id.clone(), people: ViewPeople::Assigned { target, keypoints } });
+            }
+        }
+        let capture = Capture { name: name.to_string(), participants, views, floor: None };
+        capture.validate()?;
+        Ok((capture, warnings))
+    }
+}
+
+/// The valid poses of `poses` within `range` as a trajectory.
+fn trajectory_in(poses: &BTreeMap<i64, Option<RigidTransform>>, range: &RangeInclusive<i64>) -> Trajectory {
+    let mut t = Trajectory::default();
+    for (&ts, pose) in poses.range(range.clone()) {
+        if let Some(pose) = pose {
+            t.timestamps_ns.push(ts);
+            t.poses.push(*pose);
+        }
+    }
+    t
 }
 
 #[cfg(test)]
@@ -231,7 +440,13 @@ mod tests {
     const MS: i64 = 1_000_000;
 
     fn channels() -> Vec<ChannelInfo> {
-        let c = |channel, device: &str, role, stream| ChannelInfo { channel, device: device.into(), role, stream };
+        let c = |channel, device: &str, role, stream| ChannelInfo {
+            channel,
+            device: device.into(),
+            role,
+            stream,
+            target: None,
+        };
         vec![
             c(0, "wearer", DeviceRole::Wearer, Stream::Head),
             c(1, "wearer", DeviceRole::Wearer, Stream::LeftWrist),
@@ -298,6 +513,61 @@ mod tests {
         let counts = take.frame_counts();
         assert_eq!(counts["wearer"], BTreeMap::from([("head".into(), 90), ("left-wrist".into(), 30)]));
         assert_eq!(counts["observer-1"], BTreeMap::from([("head".into(), 30), ("keypoints".into(), 30)]));
+    }
+
+    #[test]
+    fn a_room_of_two_wearers_is_a_session_each_and_one_capture() {
+        let c = |channel, device: &str, role, stream, target: Option<&str>| ChannelInfo {
+            channel,
+            device: device.into(),
+            role,
+            stream,
+            target: target.map(Into::into),
+        };
+        let mut take = LiveTake::new();
+        take.set_channels(&[
+            c(0, "bob", DeviceRole::Wearer, Stream::Head, None),
+            c(1, "alice", DeviceRole::Wearer, Stream::Head, None),
+            c(2, "bob-sees-alice", DeviceRole::Observer, Stream::Head, Some("alice")),
+            c(3, "bob-sees-alice", DeviceRole::Observer, Stream::Keypoints, Some("alice")),
+            c(4, "alice-sees-bob", DeviceRole::Observer, Stream::Head, Some("bob")),
+            c(5, "stray", DeviceRole::Observer, Stream::Head, None),
+        ]);
+        for device in ["bob-sees-alice", "alice-sees-bob", "stray"] {
+            take.set_camera(device, camera());
+        }
+        let points = [Some(Keypoint2d { pixel: Vec2::new(300.0, 200.0), score: 0.9 }); COCO17_COUNT];
+        for i in 0..30 {
+            let ts = i * 33 * MS;
+            for channel in [0, 1, 2, 4, 5] {
+                take.add_frame(&pose(ts + i64::from(channel) * MS, channel, true));
+            }
+            take.add_frame(&DataFrame { channel: 3, timestamp_ns: ts, payload: FramePayload::Keypoints(points) });
+        }
+        assert_eq!(take.wearers(), ["alice", "bob"]);
+        // The grid runs from the first wearer's head.
+        assert_eq!(take.head_range_ns(), Some((MS, 29 * 33 * MS + MS)));
+        let (alice, warnings) = take.to_session_of("alice", "take", None).unwrap();
+        assert_eq!(alice.observers.iter().map(|o| o.id.as_str()).collect::<Vec<_>>(), ["bob-sees-alice"]);
+        assert_eq!(alice.observers[0].keypoints.as_ref().unwrap().frames.len(), 30);
+        assert!(
+            warnings.iter().any(|w| w.file == "observers/stray" && w.message.contains("no target")),
+            "{warnings:?}"
+        );
+        let (bob, _) = take.to_session_of("bob", "take", None).unwrap();
+        assert_eq!(bob.observers.iter().map(|o| o.id.as_str()).collect::<Vec<_>>(), ["alice-sees-bob"]);
+        assert!(bob.observers[0].keypoints.is_none());
+        assert_eq!(take.to_session("take", None).unwrap().0.wearer.head, alice.wearer.head);
+        assert!(matches!(take.to_session_of("stray", "t", None), Err(TakeError::NoSuchWearer(_))));
+
+        let (capture, _) = take.to_capture("take").unwrap();
+        let ids: Vec<_> = capture.participants.iter().map(|p| (p.id.as_str(), p.reconstruct)).collect();
+        assert_eq!(ids, [("alice", true), ("bob", true), ("alice-sees-bob", false), ("bob-sees-alice", false)]);
+        assert_eq!(capture.views.len(), 1, "only bob's camera sent keypoints (of alice)");
+        // Reconstructing alice from the capture: the same session as from the take.
+        let from_capture = capture.session_for(0).unwrap();
+        assert_eq!(from_capture.wearer.head, alice.wearer.head);
+        assert_eq!(from_capture.observers.iter().find(|o| o.keypoints.is_some()).unwrap().id, "bob-sees-alice");
     }
 
     #[test]

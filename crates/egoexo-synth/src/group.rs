@@ -92,6 +92,46 @@ pub struct SimulatedCapture {
     pub bystanders: Vec<SmplMotion>,
 }
 
+impl SimulatedCapture {
+    /// The capture with every view assigned by the simulator's own identities (a perfect
+    /// association): per camera, one keypoint track per other participant, bystanders left out.
+    pub fn with_true_identities(&self) -> Capture {
+        let mut capture = self.capture.clone();
+        let mut views = Vec::new();
+        for (view, identities) in self.capture.views.iter().zip(&self.identities) {
+            let ViewPeople::Unassigned(people) = &view.people else {
+                views.push(view.clone());
+                continue;
+            };
+            for (q, participant) in self.capture.participants.iter().enumerate() {
+                if participant.id == view.observer {
+                    continue;
+                }
+                let frames = people
+                    .frames
+                    .iter()
+                    .zip(identities)
+                    .map(|(detections, who)| {
+                        who.iter().position(|w| *w == Some(q)).map_or([None; COCO17_COUNT], |d| detections[d])
+                    })
+                    .collect();
+                views.push(View {
+                    observer: view.observer.clone(),
+                    people: ViewPeople::Assigned {
+                        target: participant.id.clone(),
+                        keypoints: egoexo_session::model::KeypointTrack {
+                            timestamps_ns: people.timestamps_ns.clone(),
+                            frames,
+                        },
+                    },
+                });
+            }
+        }
+        capture.views = views;
+        capture
+    }
+}
+
 /// Participants for a group walk: `n` people on concentric circles around the origin (radii
 /// 1.5, 3, 4.5 m, …) walking the same way at the same angular speed, a little apart, so they
 /// stay near each other and can look across at one another; statures 1.50–1.70 m (head

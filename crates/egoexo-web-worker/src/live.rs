@@ -11,6 +11,11 @@
 //! be shown; frames passed over while the worker was busy are counted, never queued, so
 //! what is drawn is never stale. A gap in the head stream is a gap in the take (alignment
 //! marks its frames invalid); nothing is repeated or invented.
+//!
+//! A room of several wearers: the grid is the first wearer's (by id); every other wearer is
+//! reconstructed on the same window from their own devices and the observers that name them
+//! (`LiveTake::to_session_of`) and drawn beside the first (`SceneData::with_others`), each in
+//! their participant colour. The frame's facts are the first wearer's.
 
 use std::ops::Range;
 
@@ -19,6 +24,7 @@ use egoexo_infer::windows::WINDOW;
 use egoexo_infer::{Engine, InferError, Method, ReconstructOptions};
 use egoexo_protocol::live::{DataFrame, RelayMessage};
 use egoexo_protocol::worker::{LiveFrameInfo, LiveTakeSummary};
+use egoexo_scene::SceneParticipant;
 use egoexo_session::align::{AlignError, AlignOptions, align_on_timeline};
 use egoexo_session::live::{FrameAdded, LiveTake, TakeError};
 use thiserror::Error;
@@ -65,6 +71,9 @@ pub struct LiveFrame {
     pub tracked: bool,
     /// Frames that became showable since the last frame shown but were passed over.
     pub skipped: usize,
+    /// A room of several wearers: every wearer drawn, the first one (whose facts these are)
+    /// first; empty for one wearer.
+    pub wearers: Vec<String>,
 }
 
 /// A take and the state of its live reconstruction.
@@ -166,26 +175,31 @@ impl LiveReconstructor {
         };
         let last_ns = timeline.timestamp_ns(timeline.frames - 1);
         let range = timeline.start_ns - MARGIN_NS..=last_ns + MARGIN_NS;
-        let (session, _) = self.take.to_session("live", Some(range))?;
-        let aligned =
-            align_on_timeline(&session, timeline, &AlignOptions { fps: self.fps, ..AlignOptions::default() })?;
+        let wearers = self.take.wearers();
         let index = frame - start;
-        // Ego-exo when an observer has keypoints of this very frame; otherwise (none
-        // connected, none streaming, or the wearer out of every view) the ego-only network,
-        // which was trained without observers.
-        let has_exo = aligned.observers.iter().any(|o| o.keypoints[index].iter().any(Option::is_some));
-        let method = if has_exo { Method::EgoExo } else { Method::EgoOnly };
-        // Tracking as for a recording (`tracking: None`, `AlignedSession::tracking_mode`):
-        // 3-point whenever a wrist device is connected; the network reads, frame by frame,
-        // which wrists are tracked (ego feature layout v2), so a wrist arriving a sample after
-        // the head or dropping out for a moment is simply untracked on those frames.
-        let options = ReconstructOptions { method, tracking: None, stride: WINDOW, ..ReconstructOptions::default() };
-        let recon = engine.reconstruct(&aligned, &options, &mut |_| true)?;
-        // The scene of the one frame shown (its rays only), on the window's floor (the lowest
-        // foot over the window: steady while the feet lift).
-        let one = index..index + 1;
-        let mut scene = crate::scene::build_scene(&aligned.frames_slice(one.clone()), &recon.frames_slice(one), None);
-        scene.floor_y = crate::scene::floor_y(&recon.joints, &recon.valid);
+        let shown = |wearer: &str| -> Result<_, LiveError> {
+            let (session, _) = self.take.to_session_of(wearer, "live", Some(range.clone()))?;
+            let aligned =
+                align_on_timeline(&session, timeline, &AlignOptions { fps: self.fps, ..AlignOptions::default() })?;
+            let (recon, scene) = reconstruct_frame(engine, &aligned, index)?;
+            Ok((recon, scene))
+        };
+        let first = wearers.first().cloned().unwrap_or_default();
+        let (recon, mut scene) = shown(&first)?;
+        let method = recon.method;
+        if wearers.len() > 1 {
+            // Everyone else on the same window, drawn beside the first; a wearer whose head has
+            // not streamed within it is simply not drawn.
+            let mut others = Vec::new();
+            for (colour, wearer) in wearers.iter().enumerate().skip(1) {
+                if let Ok((_, mut other)) = shown(wearer) {
+                    other.participant = Some(SceneParticipant { id: wearer.clone(), colour });
+                    others.push(other);
+                }
+            }
+            scene.participant = Some(SceneParticipant { id: first.clone(), colour: 0 });
+            scene = scene.with_others(&others);
+        }
         scene.check().map_err(LiveError::Scene)?;
         let exo_observers = recon
             .gates
@@ -204,8 +218,33 @@ impl LiveReconstructor {
             exo_observers,
             tracked: recon.valid.get(index).copied().unwrap_or(false),
             skipped,
+            wearers: if wearers.len() > 1 { wearers } else { Vec::new() },
         }))
     }
+}
+
+/// Reconstructs the window `aligned` and returns it with the scene of frame `index` (its rays
+/// only), on the window's floor (the lowest foot over the window: steady while the feet lift).
+fn reconstruct_frame(
+    engine: &Engine,
+    aligned: &egoexo_core::aligned::AlignedSession,
+    index: usize,
+) -> Result<(egoexo_infer::Reconstruction, egoexo_scene::SceneData), LiveError> {
+    // Ego-exo when an observer has keypoints of this very frame; otherwise (none connected,
+    // none streaming, or the wearer out of every view) the ego-only network, which was
+    // trained without observers.
+    let has_exo = aligned.observers.iter().any(|o| o.keypoints[index].iter().any(Option::is_some));
+    let method = if has_exo { Method::EgoExo } else { Method::EgoOnly };
+    // Tracking as for a recording (`tracking: None`, `AlignedSession::tracking_mode`): 3-point
+    // whenever a wrist device is connected; the network reads, frame by frame, which wrists
+    // are tracked (ego feature layout v2), so a wrist arriving a sample after the head or
+    // dropping out for a moment is simply untracked on those frames.
+    let options = ReconstructOptions { method, tracking: None, stride: WINDOW, ..ReconstructOptions::default() };
+    let recon = engine.reconstruct(aligned, &options, &mut |_| true)?;
+    let one = index..index + 1;
+    let mut scene = crate::scene::build_scene(&aligned.frames_slice(one.clone()), &recon.frames_slice(one), None);
+    scene.floor_y = crate::scene::floor_y(&recon.joints, &recon.valid);
+    Ok((recon, scene))
 }
 
 /// What `take` holds, for the page (`shown` / `skipped`: live frames so far).
@@ -234,6 +273,7 @@ impl LiveFrame {
             skipped: self.skipped,
             compute_ms: None,
             posted_ms: None,
+            wearers: self.wearers.clone(),
         }
     }
 }

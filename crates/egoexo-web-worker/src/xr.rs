@@ -160,7 +160,12 @@ pub fn hello(join: &Join, device_id: &str) -> Result<String, XrError> {
     let message = ClientMessage::Hello {
         protocol: LIVE_PROTOCOL_VERSION,
         join: join.clone(),
-        device: Some(DeviceHello { id: id.to_string(), role: DeviceRole::Wearer, streams: XR_STREAMS.to_vec() }),
+        device: Some(DeviceHello {
+            id: id.to_string(),
+            role: DeviceRole::Wearer,
+            streams: XR_STREAMS.to_vec(),
+            target: None,
+        }),
     };
     to_json(&message)
 }

@@ -40,7 +40,7 @@ fn as_relay(session: &Session, observers: bool) -> (Vec<RelayMessage>, Vec<DataF
     let mut frames = Vec::new();
     let mut add = |device: &str, role, stream, t: &egoexo_session::model::Trajectory| {
         let channel = channels.len() as u16;
-        channels.push(ChannelInfo { channel, device: device.into(), role, stream });
+        channels.push(ChannelInfo { channel, device: device.into(), role, stream, target: None });
         for (ts, pose) in t.timestamps_ns.iter().zip(&t.poses) {
             frames.push(DataFrame { channel, timestamp_ns: *ts, payload: FramePayload::Pose(Some(*pose)) });
         }
@@ -61,6 +61,7 @@ fn as_relay(session: &Session, observers: bool) -> (Vec<RelayMessage>, Vec<DataF
             device: o.id.clone(),
             role: DeviceRole::Observer,
             stream: Stream::Keypoints,
+            target: None,
         });
         let k = o.keypoints.as_ref().unwrap();
         for (ts, points) in k.timestamps_ns.iter().zip(&k.frames) {
@@ -194,4 +195,88 @@ fn a_live_variant_for_the_lookahead_reads_the_frames_out_and_other_lookaheads_us
         assert!(shown.iter().all(|f| f.trained_for_lookahead == trained), "lookahead {lookahead}");
         assert_eq!(shown[0].info(lookahead).trained_for_lookahead, trained);
     }
+}
+
+/// A capture's devices (`egoexo_session::live::capture_devices`) as the relay delivers them:
+/// the channel list (observers naming their target wearer), calibrations, then every frame in
+/// time order.
+fn capture_as_relay(capture: &egoexo_session::capture::Capture) -> (Vec<RelayMessage>, Vec<DataFrame>) {
+    let mut channels = Vec::new();
+    let mut frames = Vec::new();
+    let mut messages = Vec::new();
+    for device in egoexo_session::live::capture_devices(capture).unwrap() {
+        let mut channel_of = |stream| {
+            let channel = channels.len() as u16;
+            let (id, role, target) = (device.hello.id.clone(), device.hello.role, device.hello.target.clone());
+            channels.push(ChannelInfo { channel, device: id, role, stream, target });
+            channel
+        };
+        for (stream, t) in &device.poses {
+            let channel = channel_of(*stream);
+            for (ts, pose) in t.timestamps_ns.iter().zip(&t.poses) {
+                frames.push(DataFrame { channel, timestamp_ns: *ts, payload: FramePayload::Pose(Some(*pose)) });
+            }
+        }
+        if let Some(k) = &device.keypoints {
+            let channel = channel_of(Stream::Keypoints);
+            for (ts, points) in k.timestamps_ns.iter().zip(&k.frames) {
+                frames.push(DataFrame { channel, timestamp_ns: *ts, payload: FramePayload::Keypoints(*points) });
+            }
+        }
+        if let Some(camera) = device.camera {
+            messages.push(RelayMessage::Calibration { device: device.hello.id.clone(), camera });
+        }
+    }
+    frames.sort_by_key(|f| f.timestamp_ns);
+    messages.insert(0, RelayMessage::Channels { channels });
+    (messages, frames)
+}
+
+/// Two participants in one room, each a wearer and each one's glasses an observer of the
+/// other: both are drawn in every live frame, and the kept take is a capture of both.
+#[test]
+fn a_room_of_two_wearers_shows_both_and_keeps_a_capture() {
+    use egoexo_synth::group::{GroupConfig, group_walk, simulate_group};
+    let sim = simulate_group(&group_walk(2, 5.0), "pair", &GroupConfig::default(), 5).unwrap();
+    let capture = sim.with_true_identities();
+    let (messages, frames) = capture_as_relay(&capture);
+    let mut worker = worker();
+    let mut live = LiveReconstructor::new(worker.live_fps(), 8);
+    for m in &messages {
+        live.handle_relay_message(m);
+    }
+    let mut shown = Vec::new();
+    for frame in &frames {
+        live.add_frame(frame);
+        if frame.channel == 0
+            && let Some(f) = worker.live_frame(&mut live).unwrap()
+        {
+            shown.push(f);
+        }
+    }
+    assert!(shown.len() > 100, "{} frames shown", shown.len());
+    let mut both = 0;
+    for f in &shown {
+        assert_eq!(f.wearers, ["participant-1", "participant-2"]);
+        let scene: SceneData = serde_json::from_slice(&f.scene_json).unwrap();
+        scene.check().unwrap();
+        assert_eq!(scene.participant.as_ref().map(|p| p.id.as_str()), Some("participant-1"));
+        assert_eq!(
+            scene.observers.iter().map(|o| o.id.as_str()).collect::<Vec<_>>(),
+            ["participant-2-sees-participant-1"]
+        );
+        assert_eq!(scene.others.len(), 1);
+        assert_eq!((scene.others[0].participant.id.as_str(), scene.others[0].participant.colour), ("participant-2", 1));
+        both += usize::from(scene.others[0].valid[0]);
+    }
+    assert!(both * 10 > shown.len() * 9, "participant-2 drawn in {both} of {} frames", shown.len());
+    assert!(shown.iter().any(|f| f.method == Method::EgoExo), "participant-2's glasses see participant-1");
+
+    let summary = worker.keep_take(&live.into_take(), "room").unwrap();
+    let reconstructed: Vec<_> = summary.participants.iter().filter(|p| p.reconstruct).map(|p| p.id.as_str()).collect();
+    assert_eq!(reconstructed, ["participant-1", "participant-2"]);
+    assert_eq!(worker.participants_to_reconstruct(), ["participant-1", "participant-2"]);
+    let result = worker.reconstruct(false, &mut |_| true).unwrap();
+    assert_eq!(result.participants.len(), 2);
+    assert!(result.participants.iter().all(|p| p.method == "ego-exo"), "{:?}", result.participants);
 }

@@ -33,6 +33,11 @@ pub struct Args {
     /// People without glasses crossing a capture of several participants.
     #[arg(long, default_value_t = 2)]
     pub bystanders: usize,
+    /// A capture of several participants with the simulator's own identities: every camera's
+    /// keypoints assigned to the participant they are of (bystanders left out) instead of
+    /// people without identity — what a live room streams (`egoexo live replay`).
+    #[arg(long)]
+    pub identities: bool,
     /// Wearer tracking: 1 (glasses), 3 (glasses + wrist devices), 3-hand-tracking.
     #[arg(long, value_enum, default_value = "3")]
     pub tracking: TrackingArg,
@@ -113,7 +118,8 @@ fn write_group(args: &Args) -> Result<()> {
     };
     let name = format!("group-{}x{}s", args.participants, args.seconds);
     let sim = simulate_group(&group_walk(usize::from(args.participants), args.seconds), &name, &config, args.seed)?;
-    save_capture(&sim.capture, Default::default(), &args.out, args.folder)
+    let capture = if args.identities { sim.with_true_identities() } else { sim.capture };
+    save_capture(&capture, Default::default(), &args.out, args.folder)
         .with_context(|| format!("writing {}", args.out.display()))?;
     let bytes = std::fs::metadata(&args.out).map(|m| m.len()).unwrap_or(0);
     println!(

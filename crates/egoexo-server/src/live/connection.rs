@@ -9,8 +9,8 @@ use std::time::Duration;
 
 use axum::extract::ws::{CloseFrame, Message, WebSocket};
 use egoexo_protocol::live::{
-    ClientMessage, Close, CloseKind, DeviceHello, Join, LIVE_PROTOCOL_VERSION, LIVE_SUBPROTOCOL, MAX_MESSAGE_BYTES,
-    RelayMessage, valid_device_id,
+    ClientMessage, Close, CloseKind, DeviceHello, DeviceRole, Join, LIVE_PROTOCOL_VERSION, LIVE_SUBPROTOCOL,
+    MAX_MESSAGE_BYTES, RelayMessage, valid_device_id,
 };
 use futures::stream::{SplitSink, SplitStream};
 use futures::{SinkExt, StreamExt};
@@ -160,6 +160,17 @@ fn join_room(
         }
         if hello.streams.is_empty() {
             return Err(Close::new(CloseKind::BadHello, "a device announces at least one stream"));
+        }
+        if let Some(target) = &hello.target {
+            if hello.role != DeviceRole::Observer {
+                return Err(Close::new(CloseKind::BadHello, "only an observer names a target wearer"));
+            }
+            if !valid_device_id(target) || *target == hello.id {
+                return Err(Close::new(
+                    CloseKind::BadHello,
+                    "an observer's target is another device's id (1–64 of A–Z a–z 0–9 . _ -)",
+                ));
+            }
         }
     }
     Ok((room, device))

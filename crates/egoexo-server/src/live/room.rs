@@ -163,24 +163,17 @@ impl Room {
         if let Some(stream) = streams.iter().find(|s| !hello.role.allows(**s)) {
             return Err(Close::new(CloseKind::NotAllowed, format!("a {:?} may not publish {stream:?}", hello.role)));
         }
-        if hello.role == DeviceRole::Wearer {
-            for stream in &streams {
-                let owner = inner.devices.iter().find(|(id, d)| {
-                    *id != &hello.id && d.role == DeviceRole::Wearer && d.channels.contains_key(stream)
-                });
-                if let Some((owner, _)) = owner {
-                    return Err(Close::new(
-                        CloseKind::NotAllowed,
-                        format!("the wearer's {stream:?} stream belongs to device `{owner}` in this room"),
-                    ));
-                }
-            }
-        }
         match inner.devices.get(&hello.id) {
             Some(existing) if existing.role != hello.role => {
                 return Err(Close::new(
                     CloseKind::NotAllowed,
                     format!("device `{}` is a {:?} in this room", hello.id, existing.role),
+                ));
+            }
+            Some(_) if inner.channels.iter().any(|c| c.device == hello.id && c.target != hello.target) => {
+                return Err(Close::new(
+                    CloseKind::NotAllowed,
+                    format!("device `{}` observes another wearer in this room", hello.id),
                 ));
             }
             None if inner.devices.len() >= self.limits.max_devices_per_room => {
@@ -206,7 +199,13 @@ impl Room {
         for &stream in &streams {
             if let std::collections::btree_map::Entry::Vacant(entry) = channels.entry(stream) {
                 let channel = inner.channels.len() as u16;
-                inner.channels.push(ChannelInfo { channel, device: hello.id.clone(), role: hello.role, stream });
+                inner.channels.push(ChannelInfo {
+                    channel,
+                    device: hello.id.clone(),
+                    role: hello.role,
+                    stream,
+                    target: hello.target.clone(),
+                });
                 inner.history.push(VecDeque::new());
                 entry.insert(channel);
                 changed = true;

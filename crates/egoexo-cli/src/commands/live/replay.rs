@@ -14,7 +14,9 @@ use egoexo_protocol::live::{
     ClientMessage, DataFrame, DeviceHello, DeviceRole, FramePayload, Join, LIVE_PROTOCOL_VERSION, LiveLink, Stream,
 };
 use egoexo_session::align::resample_trajectory;
-use egoexo_session::model::{Session, Trajectory};
+use egoexo_session::import::import_capture_path;
+use egoexo_session::live::{CaptureDevice, capture_devices};
+use egoexo_session::model::Trajectory;
 use futures::SinkExt;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -145,9 +147,17 @@ fn pose_samples(trajectory: &Trajectory, stream: Stream, max_hz: f64, range: (i6
         .collect()
 }
 
-fn plan_devices(session: &Session, args: &Args) -> Result<(Vec<DevicePlan>, (i64, i64))> {
-    let (head_first, head_last) =
-        session.wearer.head.time_range_ns().context("the session has no wearer head poses")?;
+/// What each device streams: a capture's devices (`capture_devices`: one wearer and its
+/// observers, or every participant of several as a wearer and each camera's keypoints of
+/// each of them as an observer naming its target) within `--start-s` / `--duration-s` of the
+/// first wearer's head.
+fn plan_devices(devices: Vec<CaptureDevice>, args: &Args) -> Result<(Vec<DevicePlan>, (i64, i64))> {
+    let head = devices
+        .iter()
+        .find(|d| d.hello.role == DeviceRole::Wearer)
+        .and_then(|d| d.poses.iter().find(|(s, _)| *s == Stream::Head))
+        .and_then(|(_, head)| head.time_range_ns());
+    let (head_first, head_last) = head.context("the session has no wearer head poses")?;
     let start = head_first + (args.start_s * 1e9) as i64;
     let end = match args.duration_s {
         Some(d) => (start + (d * 1e9) as i64).min(head_last),
@@ -158,47 +168,26 @@ fn plan_devices(session: &Session, args: &Args) -> Result<(Vec<DevicePlan>, (i64
     }
     let range = (start, end);
     let mut plans = Vec::new();
-    let mut wearer = Vec::new();
-    let mut streams = vec![Stream::Head];
-    wearer.extend(pose_samples(&session.wearer.head, Stream::Head, args.max_pose_hz, range));
-    for (stream, wrist) in
-        [(Stream::LeftWrist, &session.wearer.left_wrist), (Stream::RightWrist, &session.wearer.right_wrist)]
-    {
-        if let Some(wrist) = wrist {
-            streams.push(stream);
-            wearer.extend(pose_samples(wrist, stream, args.max_pose_hz, range));
+    for device in devices {
+        if args.no_observers && device.hello.role == DeviceRole::Observer {
+            continue;
         }
-    }
-    plans.push(DevicePlan {
-        hello: DeviceHello { id: "wearer".into(), role: DeviceRole::Wearer, streams },
-        camera: None,
-        samples: wearer,
-    });
-    if !args.no_observers {
-        for observer in &session.observers {
-            let mut samples = pose_samples(&observer.head, Stream::Head, args.max_pose_hz, range);
-            let mut streams = vec![Stream::Head];
-            if let Some(keypoints) = &observer.keypoints {
-                streams.push(Stream::Keypoints);
-                samples.extend(
-                    keypoints
-                        .timestamps_ns
-                        .iter()
-                        .zip(&keypoints.frames)
-                        .filter(|(t, _)| (start..=end).contains(*t))
-                        .map(|(&t_ns, frame)| Sample {
-                            t_ns,
-                            stream: Stream::Keypoints,
-                            payload: FramePayload::Keypoints(*frame),
-                        }),
-                );
-            }
-            plans.push(DevicePlan {
-                hello: DeviceHello { id: observer.id.clone(), role: DeviceRole::Observer, streams },
-                camera: Some(observer.camera),
-                samples,
-            });
+        let mut samples = Vec::new();
+        for (stream, trajectory) in &device.poses {
+            samples.extend(pose_samples(trajectory, *stream, args.max_pose_hz, range));
         }
+        if let Some(keypoints) = &device.keypoints {
+            samples.extend(
+                keypoints.timestamps_ns.iter().zip(&keypoints.frames).filter(|(t, _)| (start..=end).contains(*t)).map(
+                    |(&t_ns, frame)| Sample {
+                        t_ns,
+                        stream: Stream::Keypoints,
+                        payload: FramePayload::Keypoints(*frame),
+                    },
+                ),
+            );
+        }
+        plans.push(DevicePlan { hello: device.hello, camera: device.camera, samples });
     }
     for plan in &mut plans {
         plan.samples.sort_by_key(|s| s.t_ns);
@@ -378,8 +367,10 @@ pub fn run(args: Args) -> Result<()> {
         bail!("--max-pose-hz must be positive");
     }
     let server = ServerAddress::parse(&args.url)?;
-    let imported = args.import.import(&args.session)?;
-    let (plans, range) = plan_devices(&imported.session, &args)?;
+    // A capture of several participants streams every one of them as a wearer.
+    let imported = import_capture_path(&args.session, &args.import.import_options()?)?;
+    let name = imported.capture.name.clone();
+    let (plans, range) = plan_devices(capture_devices(&imported.capture)?, &args)?;
     let join = match &args.room {
         Some(room) => client::parse_join(room)?,
         None => {
@@ -398,7 +389,7 @@ pub fn run(args: Args) -> Result<()> {
     eprintln!(
         "replaying {:.1} s of `{}` at {}×: {}",
         session_span_s,
-        imported.session.name,
+        name,
         args.speed,
         plans.iter().map(|p| format!("{} ({} frames)", p.hello.id, p.samples.len())).collect::<Vec<_>>().join(", ")
     );

@@ -10,8 +10,8 @@
 //! A room may hold several wearers (a capture of several participants): each is a session of
 //! its own ([`LiveTake::to_session_of`]) with the observers that name them as their target
 //! (an observer naming none belongs to the room's only wearer), and the whole take is a
-//! [`Capture`] ([`LiveTake::to_capture`]). The frame grid runs from the *first* wearer's (by
-//! id) first head pose.
+//! [`Capture`] ([`LiveTake::to_capture`]). The frame grid runs from the first head pose of
+//! the wearer who streamed theirs first.
 
 use std::collections::BTreeMap;
 use std::ops::RangeInclusive;
@@ -165,6 +165,9 @@ pub struct LiveTake {
     channels: BTreeMap<u16, ChannelInfo>,
     devices: BTreeMap<String, DeviceTake>,
     stats: TakeStats,
+    /// The wearer whose head pose arrived first: the take's frame grid is theirs, so a wearer
+    /// joining later never moves it.
+    first_wearer: Option<String>,
 }
 
 impl LiveTake {
@@ -193,6 +196,9 @@ impl LiveTake {
             self.stats.unknown_channel += 1;
             return FrameAdded::UnknownChannel;
         };
+        if info.role == DeviceRole::Wearer && info.stream == Stream::Head && self.first_wearer.is_none() {
+            self.first_wearer = Some(info.device.clone());
+        }
         let device = self.devices.entry(info.device.clone()).or_default();
         let fresh = match (&frame.payload, info.stream) {
             (FramePayload::Keypoints(points), Stream::Keypoints) => {
@@ -223,16 +229,22 @@ impl LiveTake {
         self.stats
     }
 
-    /// The wearers whose head has streamed, by device id (the first one's head is the
-    /// take's frame grid).
+    /// The wearers whose head has streamed: the first to stream it (whose head is the take's
+    /// frame grid), then the others by device id.
     pub fn wearers(&self) -> Vec<String> {
-        self.devices
+        let mut wearers: Vec<String> = self
+            .devices
             .iter()
             .filter(|(_, d)| {
                 d.role == Some(DeviceRole::Wearer) && d.poses.get(&Stream::Head).is_some_and(|h| !h.is_empty())
             })
             .map(|(id, _)| id.clone())
-            .collect()
+            .collect();
+        if let Some(first) = wearers.iter().position(|w| Some(w) == self.first_wearer.as_ref()) {
+            let first = wearers.remove(first);
+            wearers.insert(0, first);
+        }
+        wearers
     }
 
     fn wearer_stream(&self, wearer: &str, stream: Stream) -> Option<&BTreeMap<i64, Option<RigidTransform>>> {
@@ -544,9 +556,9 @@ mod tests {
             }
             take.add_frame(&DataFrame { channel: 3, timestamp_ns: ts, payload: FramePayload::Keypoints(points) });
         }
-        assert_eq!(take.wearers(), ["alice", "bob"]);
-        // The grid runs from the first wearer's head.
-        assert_eq!(take.head_range_ns(), Some((MS, 29 * 33 * MS + MS)));
+        // Bob's head came first: the grid is his, whoever joins later.
+        assert_eq!(take.wearers(), ["bob", "alice"]);
+        assert_eq!(take.head_range_ns(), Some((0, 29 * 33 * MS)));
         let (alice, warnings) = take.to_session_of("alice", "take", None).unwrap();
         assert_eq!(alice.observers.iter().map(|o| o.id.as_str()).collect::<Vec<_>>(), ["bob-sees-alice"]);
         assert_eq!(alice.observers[0].keypoints.as_ref().unwrap().frames.len(), 30);
@@ -557,15 +569,15 @@ mod tests {
         let (bob, _) = take.to_session_of("bob", "take", None).unwrap();
         assert_eq!(bob.observers.iter().map(|o| o.id.as_str()).collect::<Vec<_>>(), ["alice-sees-bob"]);
         assert!(bob.observers[0].keypoints.is_none());
-        assert_eq!(take.to_session("take", None).unwrap().0.wearer.head, alice.wearer.head);
+        assert_eq!(take.to_session("take", None).unwrap().0.wearer.head, bob.wearer.head);
         assert!(matches!(take.to_session_of("stray", "t", None), Err(TakeError::NoSuchWearer(_))));
 
         let (capture, _) = take.to_capture("take").unwrap();
         let ids: Vec<_> = capture.participants.iter().map(|p| (p.id.as_str(), p.reconstruct)).collect();
-        assert_eq!(ids, [("alice", true), ("bob", true), ("alice-sees-bob", false), ("bob-sees-alice", false)]);
+        assert_eq!(ids, [("bob", true), ("alice", true), ("alice-sees-bob", false), ("bob-sees-alice", false)]);
         assert_eq!(capture.views.len(), 1, "only bob's camera sent keypoints (of alice)");
         // Reconstructing alice from the capture: the same session as from the take.
-        let from_capture = capture.session_for(0).unwrap();
+        let from_capture = capture.session_for(1).unwrap();
         assert_eq!(from_capture.wearer.head, alice.wearer.head);
         assert_eq!(from_capture.observers.iter().find(|o| o.keypoints.is_some()).unwrap().id, "bob-sees-alice");
     }

@@ -12,7 +12,8 @@
 //! what is drawn is never stale. A gap in the head stream is a gap in the take (alignment
 //! marks its frames invalid); nothing is repeated or invented.
 //!
-//! A room of several wearers: the grid is the first wearer's (by id); every other wearer is
+//! A room of several wearers: the grid is the first wearer's (whose head streamed first,
+//! `LiveTake::wearers`); every other wearer is
 //! reconstructed on the same window from their own devices and the observers that name them
 //! (`LiveTake::to_session_of`) and drawn beside the first (`SceneData::with_others`), each in
 //! their participant colour. The frame's facts are the first wearer's.

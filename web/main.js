@@ -163,7 +163,7 @@ function onWorkerEvent(event) {
       break;
     case 'reconstructed':
       if (state.selecting) {
-        showScene(event.scene, event.summary, state.selecting.how, state.selecting.frame);
+        showScene(event.scene, event.summary, state.selecting.how, state.selecting.moment);
         state.selecting = null;
         break;
       }
@@ -386,9 +386,12 @@ function showParticipants(s) {
 
 function selectParticipant(id) {
   if (state.busy || state.session?.participant === id) return;
-  const frame = state.viewer && state.summary ? state.viewer.frame() : null;
+  // The moment shown, on the session clock: the other participant's timeline may start
+  // elsewhere.
+  const v = state.viewer;
+  const moment = v && state.summary ? v.start_s() + v.time() : null;
   const how = state.openedShare ? state.sharedBy : '';
-  state.selecting = { id, frame, how };
+  state.selecting = { id, moment, how };
   setBusy(true);
   setState('busy');
   state.client.select_participant(id);
@@ -420,7 +423,7 @@ function showSession(s) {
   $('result-facts').replaceChildren();
 }
 
-function showScene(scene, summary, how, keepFrame = null) {
+function showScene(scene, summary, how, keepMoment = null) {
   const viewer = state.viewer;
   try {
     if (!viewer) throw new Error('the 3D view could not start (see above)');
@@ -473,9 +476,9 @@ function showScene(scene, summary, how, keepFrame = null) {
   viewer.clear_loop();
   const time = state.pendingTime;
   state.pendingTime = null;
-  if (keepFrame != null) {
-    // Another participant of the same capture: the same moment.
-    viewer.seek(Math.min(frames - 1, keepFrame));
+  if (keepMoment != null) {
+    // Another participant of the same capture: the same moment on the session clock.
+    viewer.seek(Math.max(0, Math.min(frames - 1, Math.round((keepMoment - viewer.start_s()) * viewer.fps()))));
   } else if (time) {
     // A link to a moment: show that frame (paused), or play its range in a loop.
     const fps = viewer.fps();

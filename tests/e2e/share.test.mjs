@@ -69,6 +69,9 @@ describe('a capture of several participants', () => {
       assert.match(await app.text('#session-name'), /participant-2/);
       assert.equal(await page.evaluate(() => window.egoexo.summary.participant), 'participant-2');
       assert.equal(await page.evaluate(() => window.egoexo.viewer.frame()), 40);
+      // … the same moment on the session clock (their timelines start together here).
+      const moment = await page.evaluate(() => window.egoexo.viewer.start_s() + window.egoexo.viewer.time());
+      assert.ok(Math.abs(moment - (first.start_s + 40 / first.fps)) < 0.5 / first.fps, `moment ${moment}`);
       const second = await sceneOf(app);
       assert.equal(second.participant.id, 'participant-2');
       assert.equal(second.others[0].participant.id, 'participant-1');

@@ -44,6 +44,7 @@
 //! viewer.step(n);                    // ±n whole frames, clamped, pauses; returns the frame
 //! viewer.seek(f);                    // rounded, clamped; keeps playing; returns the frame
 //! viewer.frame(); viewer.frames(); viewer.time(); viewer.fps(); viewer.speed();
+//! viewer.start_s();                  // the session-clock time of frame 0 (start_s() + time(): the moment shown)
 //! viewer.on_frame((frame, timeSeconds) => {});   // on each change of frame or play state, and once now
 //! viewer.resize(cssWidth, cssHeight, devicePixelRatio);
 //! viewer.reset_camera();             // frame the wearer + observers now (also: double-click)

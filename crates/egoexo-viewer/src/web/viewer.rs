@@ -1019,6 +1019,12 @@ impl Viewer {
         self.read(|s| s.playback.fps())
     }
 
+    /// Session-clock time of the scene's frame 0, seconds (`SceneData::start_s`; 0 without a
+    /// scene): `start_s() + time()` is the shown moment on the session clock.
+    pub fn start_s(&self) -> f64 {
+        self.read(|s| s.scene.as_ref().map_or(0.0, |sc| sc.start_s))
+    }
+
     /// Registers `callback(frame, timeSeconds)`, called whenever the shown frame changes (by
     /// playback, keys, `step`, `seek`, a new scene), whenever playback starts or stops (so a
     /// play button can follow the Space key), and once right away. Replaces any previous

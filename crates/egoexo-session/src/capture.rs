@@ -124,14 +124,12 @@ pub enum CaptureError {
     DuplicateView { observer: String, target: String, index: usize, other: usize },
 }
 
-impl Capture {
-    /// The one-wearer session as a capture: the wearer is participant [`WEARER_ID`] (index 0,
-    /// reconstructed), every observer a participant that is not, and each observer's keypoints
-    /// a view assigned to the wearer.
-    pub fn from_session(session: &Session) -> Self {
-        let wearer = &session.wearer;
-        let mut participants = vec![Participant {
-            id: WEARER_ID.to_owned(),
+impl Participant {
+    /// A participant to reconstruct from `wearer`'s devices, with their body (`subject`,
+    /// `ground_truth`); no camera.
+    pub fn wearing(id: &str, wearer: &Wearer, subject: SubjectInfo, ground_truth: Option<GroundTruth>) -> Self {
+        Participant {
+            id: id.to_owned(),
             reconstruct: true,
             head: wearer.head.clone(),
             left_wrist: wearer.left_wrist.clone(),
@@ -141,25 +139,43 @@ impl Capture {
             camera: None,
             video: None,
             context_features: None,
-            subject: session.subject.clone(),
-            ground_truth: session.ground_truth.clone(),
-        }];
+            subject,
+            ground_truth,
+        }
+    }
+
+    /// A participant seen only through `observer`'s camera (not reconstructed): its head,
+    /// camera, video and context features. `head_joint_in_device` is the capture's head
+    /// device mounting (unused while they are not reconstructed).
+    pub fn observing(observer: &Observer, head_joint_in_device: Vec3) -> Self {
+        Participant {
+            id: observer.id.clone(),
+            reconstruct: false,
+            head: observer.head.clone(),
+            left_wrist: None,
+            right_wrist: None,
+            wrist_source: WristSource::Devices,
+            head_joint_in_device,
+            camera: Some(observer.camera),
+            video: observer.video.clone(),
+            context_features: observer.context_features.clone(),
+            subject: SubjectInfo::default(),
+            ground_truth: None,
+        }
+    }
+}
+
+impl Capture {
+    /// The one-wearer session as a capture: the wearer is participant [`WEARER_ID`] (index 0,
+    /// reconstructed), every observer a participant that is not, and each observer's keypoints
+    /// a view assigned to the wearer.
+    pub fn from_session(session: &Session) -> Self {
+        let wearer = &session.wearer;
+        let mut participants =
+            vec![Participant::wearing(WEARER_ID, wearer, session.subject.clone(), session.ground_truth.clone())];
         let mut views = Vec::new();
         for o in &session.observers {
-            participants.push(Participant {
-                id: o.id.clone(),
-                reconstruct: false,
-                head: o.head.clone(),
-                left_wrist: None,
-                right_wrist: None,
-                wrist_source: WristSource::Devices,
-                head_joint_in_device: wearer.head_joint_in_device,
-                camera: Some(o.camera),
-                video: o.video.clone(),
-                context_features: o.context_features.clone(),
-                subject: SubjectInfo::default(),
-                ground_truth: None,
-            });
+            participants.push(Participant::observing(o, wearer.head_joint_in_device));
             if let Some(keypoints) = &o.keypoints {
                 views.push(View {
                     observer: o.id.clone(),

@@ -364,67 +364,38 @@ impl LiveTake {
         Ok((session, warnings))
     }
 
-    /// The whole take as a capture named `name`: every wearer a participant to reconstruct,
-    /// every observer with a camera and a head a participant seen only through their camera,
-    /// whose keypoints are a view of their target wearer (or of the only wearer).
+    /// The whole take as a capture named `name`: every wearer a participant to reconstruct
+    /// and every observer of theirs (the observers [`LiveTake::to_session_of`] gives them) a
+    /// participant seen only through their camera, whose keypoints are a view of that wearer.
     pub fn to_capture(&self, name: &str) -> Result<(Capture, Vec<ImportWarning>), TakeError> {
         let wearers = self.wearers();
         if wearers.is_empty() {
             return Err(TakeError::NoWearerHead(name.to_string()));
         }
-        let all = i64::MIN..=i64::MAX;
-        let mut warnings = Vec::new();
+        let mut warnings: Vec<ImportWarning> = Vec::new();
         let mut participants = Vec::new();
+        let mut views = Vec::new();
+        let mut observers = Vec::new();
         for id in &wearers {
             let (session, found) = self.to_session_of(id, name, None)?;
-            warnings.extend(found.into_iter().filter(|w| !warnings.contains(w)).collect::<Vec<_>>());
-            let w = session.wearer;
-            participants.push(Participant {
-                id: id.clone(),
-                reconstruct: true,
-                head: w.head,
-                left_wrist: w.left_wrist,
-                right_wrist: w.right_wrist,
-                wrist_source: w.wrist_source,
-                head_joint_in_device: w.head_joint_in_device,
-                camera: None,
-                video: None,
-                context_features: None,
-                subject: SubjectInfo::default(),
-                ground_truth: None,
-            });
-        }
-        let mut views = Vec::new();
-        for (id, device) in self.devices.iter().filter(|(_, d)| d.role == Some(DeviceRole::Observer)) {
-            let head = device.poses.get(&Stream::Head).map(|p| trajectory_in(p, &all)).unwrap_or_default();
-            let (Some(camera), false) = (device.camera, head.is_empty()) else { continue };
-            let target = match &device.target {
-                Some(target) if wearers.contains(target) => target.clone(),
-                None if wearers.len() == 1 => wearers[0].clone(),
-                _ => continue,
-            };
-            participants.push(Participant {
-                id: id.clone(),
-                reconstruct: false,
-                head,
-                left_wrist: None,
-                right_wrist: None,
-                wrist_source: WristSource::Devices,
-                head_joint_in_device: egoexo_core::skeleton::DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE,
-                camera: Some(camera),
-                video: None,
-                context_features: None,
-                subject: SubjectInfo::default(),
-                ground_truth: None,
-            });
-            if !device.keypoints.is_empty() {
-                let keypoints = KeypointTrack {
-                    timestamps_ns: device.keypoints.keys().copied().collect(),
-                    frames: device.keypoints.values().copied().collect(),
-                };
-                views.push(View { observer: id.clone(), people: ViewPeople::Assigned { target, keypoints } });
+            for w in found {
+                if !warnings.contains(&w) {
+                    warnings.push(w);
+                }
+            }
+            let head_joint = session.wearer.head_joint_in_device;
+            participants.push(Participant::wearing(id, &session.wearer, SubjectInfo::default(), None));
+            for o in session.observers {
+                if let Some(keypoints) = &o.keypoints {
+                    views.push(View {
+                        observer: o.id.clone(),
+                        people: ViewPeople::Assigned { target: id.clone(), keypoints: keypoints.clone() },
+                    });
+                }
+                observers.push(Participant::observing(&o, head_joint));
             }
         }
+        participants.extend(observers);
         let capture = Capture { name: name.to_string(), participants, views, floor: None };
         capture.validate()?;
         Ok((capture, warnings))

@@ -76,9 +76,8 @@ pub struct SharedParticipantEntry {
 /// One participant of a capture in a share.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SharedParticipant {
-    pub summary: ParticipantSummary,
-    pub reconstruction: ReconstructionSummary,
-    pub session: SessionSummary,
+    /// Who they are and their summaries (as `share.json` lists them).
+    pub entry: SharedParticipantEntry,
     /// Their own `SceneData` JSON (without the others).
     pub scene_json: Vec<u8>,
     pub motion: SmplMotion,
@@ -98,16 +97,12 @@ pub struct ShareContents {
     pub participants: Vec<SharedParticipant>,
 }
 
-/// Where participant `id`'s entries live; `id` must be a plain name (the capture format's
-/// ids are: letters, digits, `-`, `_`, `.`, not starting with `.`).
+/// Where participant `id`'s entries live; `id` must be a participant id of the capture
+/// format (`egoexo_session::validate::is_valid_observer_id`), so it is one path component.
 pub fn participant_entry(id: &str, file: &str) -> Result<String, ShareError> {
-    let plain = !id.is_empty()
-        && !id.starts_with('.')
-        && id.len() <= 64
-        && id.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'));
-    if !plain {
+    if !egoexo_session::validate::is_valid_observer_id(id) {
         return Err(ShareError::Container(format!(
-            "participant id `{id}`: expected 1–64 letters, digits, `-`, `_` or `.`, not starting with `.`"
+            "participant id `{id}`: expected 1–64 characters from A–Z, a–z, 0–9, `.`, `_`, `-`"
         )));
     }
     Ok(format!("participants/{id}/{file}"))
@@ -148,14 +143,11 @@ pub fn pack(contents: &ShareContents) -> Result<Vec<u8>, ShareError> {
     }
     manifest.participants = Vec::new();
     for p in &contents.participants {
+        let id = &p.entry.participant.id;
         let motion = serde_json::to_vec(&p.motion).map_err(|e| json(MOTION_FILE, e))?;
-        files.insert(participant_entry(&p.summary.id, SCENE_FILE)?, p.scene_json.clone());
-        files.insert(participant_entry(&p.summary.id, MOTION_FILE)?, motion);
-        manifest.participants.push(SharedParticipantEntry {
-            participant: p.summary.clone(),
-            summary: p.reconstruction.clone(),
-            session: p.session.clone(),
-        });
+        files.insert(participant_entry(id, SCENE_FILE)?, p.scene_json.clone());
+        files.insert(participant_entry(id, MOTION_FILE)?, motion);
+        manifest.participants.push(p.entry.clone());
     }
     files.insert(MANIFEST_FILE.to_string(), serde_json::to_vec_pretty(&manifest).map_err(|e| json(MANIFEST_FILE, e))?);
     egoexo_motion_io::npz::write_zip(&files).map_err(|e| ShareError::Container(format!("cannot write the zip: {e}")))
@@ -195,13 +187,11 @@ pub fn unpack(bytes: Vec<u8>) -> Result<ShareContents, ShareError> {
     let mut participants = Vec::new();
     for entry in &manifest.participants {
         let id = &entry.participant.id;
-        if participants.iter().any(|p: &SharedParticipant| p.summary.id == *id) {
+        if participants.iter().any(|p: &SharedParticipant| p.entry.participant.id == *id) {
             return Err(ShareError::Container(format!("{MANIFEST_FILE}: participant `{id}` is listed twice")));
         }
         participants.push(SharedParticipant {
-            summary: entry.participant.clone(),
-            reconstruction: entry.summary.clone(),
-            session: entry.session.clone(),
+            entry: entry.clone(),
             scene_json: read(&participant_entry(id, SCENE_FILE)?)?,
             motion: read_motion(&participant_entry(id, MOTION_FILE)?)?,
         });

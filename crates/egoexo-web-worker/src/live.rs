@@ -178,24 +178,29 @@ impl LiveReconstructor {
         let range = timeline.start_ns - MARGIN_NS..=last_ns + MARGIN_NS;
         let wearers = self.take.wearers();
         let index = frame - start;
-        let shown = |wearer: &str| -> Result<_, LiveError> {
+        let reconstruct_wearer = |wearer: &str| -> Result<_, LiveError> {
             let (session, _) = self.take.to_session_of(wearer, "live", Some(range.clone()))?;
             let aligned =
                 align_on_timeline(&session, timeline, &AlignOptions { fps: self.fps, ..AlignOptions::default() })?;
-            let (recon, scene) = reconstruct_frame(engine, &aligned, index)?;
-            Ok((recon, scene))
+            reconstruct_frame(engine, &aligned, index)
         };
-        let first = wearers.first().cloned().unwrap_or_default();
-        let (recon, mut scene) = shown(&first)?;
+        // `newest` found a head pose, so there is a first wearer.
+        let Some(first) = wearers.first() else { return Ok(None) };
+        let (recon, mut scene) = reconstruct_wearer(first)?;
         let method = recon.method;
         if wearers.len() > 1 {
-            // Everyone else on the same window, drawn beside the first; a wearer whose head has
-            // not streamed within it is simply not drawn.
+            // Everyone else on the same window, drawn beside the first; a wearer whose head
+            // poses within the window cannot make one (not yet joined, gone, too few) is not
+            // drawn.
             let mut others = Vec::new();
             for (colour, wearer) in wearers.iter().enumerate().skip(1) {
-                if let Ok((_, mut other)) = shown(wearer) {
-                    other.participant = Some(SceneParticipant { id: wearer.clone(), colour });
-                    others.push(other);
+                match reconstruct_wearer(wearer) {
+                    Ok((_, mut other)) => {
+                        other.participant = Some(SceneParticipant { id: wearer.clone(), colour });
+                        others.push(other);
+                    }
+                    Err(LiveError::Take(TakeError::NoWearerHead(_)) | LiveError::Align(_)) => {}
+                    Err(e) => return Err(e),
                 }
             }
             scene.participant = Some(SceneParticipant { id: first.clone(), colour: 0 });

@@ -243,7 +243,7 @@ struct Runtime {
 }
 
 /// Which participant of how many a reconstruction's progress is about.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 struct ProgressScope {
     participant: String,
     index: usize,
@@ -428,54 +428,43 @@ impl Runtime {
     }
 
     async fn reconstruct_job(&self, job: JobId, overlay: bool) {
-        let participants = self.worker.borrow().participants_to_reconstruct();
-        if participants.is_empty() {
-            if let Some(summary) = self.reconstruct_open_session(job, overlay).await {
-                let scene = self.worker.borrow().scene_json();
-                match scene {
-                    Ok(scene) => self.post(Event::Reconstructed { job, scene: JsBytes::copy_from(&scene), summary }),
-                    Err(e) => self.fail(Some(job), ErrorStage::Reconstruct, &e),
+        let begun = self.worker.borrow_mut().begin_group_reconstruction();
+        let run = match begun {
+            Ok(Some(run)) => run,
+            Ok(None) => {
+                if let Some(summary) = self.reconstruct_open_session(job, overlay).await {
+                    let scene = self.worker.borrow().scene_json();
+                    match scene {
+                        Ok(scene) => {
+                            self.post(Event::Reconstructed { job, scene: JsBytes::copy_from(&scene), summary })
+                        }
+                        Err(e) => self.fail(Some(job), ErrorStage::Reconstruct, &e),
+                    }
                 }
+                return;
             }
-            return;
-        }
-        // A capture of several participants: the association once, then everyone in turn
-        // (each one's detector step and job), then the one shown with everyone drawn.
-        let shown = self.worker.borrow().session_summary().and_then(|s| s.participant);
-        let associated = self.worker.borrow_mut().associate_people();
-        if let Err(e) = associated {
-            return self.fail(Some(job), ErrorStage::Reconstruct, &e);
-        }
-        let count = participants.len();
-        for (k, id) in participants.iter().enumerate() {
+            Err(e) => return self.fail(Some(job), ErrorStage::Reconstruct, &e),
+        };
+        // A capture of several participants (associated): everyone in turn, each one's
+        // detector step and job, then the one shown with everyone drawn.
+        let count = run.participants.len();
+        let mut done_before = 0;
+        for (index, id) in run.participants.iter().enumerate() {
             if self.stopped(job) {
                 return;
             }
             if let Err(e) = self.worker.borrow_mut().open_participant_for_reconstruction(id) {
                 return self.fail(Some(job), ErrorStage::Reconstruct, &e);
             }
-            self.progress_scope.replace(Some(ProgressScope {
-                participant: id.clone(),
-                index: k,
-                count,
-                ..self.progress_scope.take().unwrap_or_default()
-            }));
+            let scope = ProgressScope { participant: id.clone(), index, count, done_before, last_total: 0 };
+            self.progress_scope.replace(Some(scope));
             let done = self.reconstruct_open_session(job, overlay).await;
-            let scope = self.progress_scope.take().unwrap_or_default();
-            self.progress_scope.replace(Some(ProgressScope {
-                done_before: scope.done_before + scope.last_total,
-                last_total: 0,
-                ..scope
-            }));
+            done_before += self.progress_scope.take().map_or(0, |s| s.last_total);
             if done.is_none() {
-                self.progress_scope.replace(None);
                 return;
             }
         }
-        self.progress_scope.replace(None);
-        let shown_again = shown.map_or(Ok(()), |id| self.worker.borrow_mut().open_participant_for_reconstruction(&id));
-        let result =
-            shown_again.and_then(|()| self.worker.borrow_mut().show_group()?.ok_or(WorkerError::NoReconstruction));
+        let result = self.worker.borrow_mut().finish_group_reconstruction(run);
         match result {
             Ok((summary, scene)) => self.post(Event::Reconstructed { job, scene: JsBytes::copy_from(&scene), summary }),
             Err(e) => self.fail(Some(job), ErrorStage::Reconstruct, &e),

@@ -35,7 +35,7 @@ use crate::detection::{DetectionTask, ObserverDetectionJob};
 
 mod group;
 
-pub use group::SelectedParticipant;
+pub use group::{GroupReconstruction, SelectedParticipant};
 
 /// Everything that can go wrong in the worker. Library errors keep their exact messages
 /// (the importers' name the file, line/field and what was expected).
@@ -518,26 +518,19 @@ impl SessionWorker {
         let mut found = Vec::new();
         for (o, track, summary) in task.finish() {
             let observer = open.imported.session.observers.get_mut(o).ok_or(WorkerError::NoSession)?;
+            found.push((observer.id.clone(), track.clone()));
             observer.keypoints = Some(track);
-            found.push((observer.id.clone(), o));
             summaries.push(summary);
         }
         open.aligned = align_for(&open.imported, fps)?;
-        open.summary = session_summary(&open.imported, &open.aligned, &open.videos);
         open.detection = summaries.clone();
-        let mut summary = open.summary.clone();
-        for (id, o) in found {
-            if let Some(track) = self.session.as_ref().and_then(|s| s.imported.session.observers[o].keypoints.clone()) {
-                self.keep_detected_keypoints(&id, &track);
-            }
+        let summary = session_summary(&open.imported, &open.aligned, &open.videos);
+        // In a capture, the found keypoints are the capture's too (saved, shared, reopened).
+        for (id, track) in found {
+            self.keep_detected_keypoints(&id, track);
         }
-        if let Some(open) = &mut self.session {
-            if let Some(group) = &self.group {
-                summary.participants = group.participants.clone();
-                summary.participant = Some(group.participants[group.selected].id.clone());
-            }
-            open.summary = summary;
-        }
+        let summary = self.with_group(summary);
+        self.session.as_mut().ok_or(WorkerError::NoSession)?.summary = summary;
         Ok(summaries)
     }
 
@@ -714,21 +707,14 @@ impl SessionWorker {
         ego_only_overlay: bool,
         progress: &mut dyn FnMut(JobProgress) -> bool,
     ) -> Result<ReconstructionSummary, WorkerError> {
-        let participants = self.participants_to_reconstruct();
-        if !participants.is_empty() {
-            let shown = self.session_summary().and_then(|s| s.participant);
-            self.associate_people()?;
-            for id in &participants {
-                self.open_participant_for_reconstruction(id)?;
-                self.reconstruct_open_session(ego_only_overlay, progress)?;
-            }
-            if let Some(id) = shown {
-                self.open_participant_for_reconstruction(&id)?;
-            }
-            let (summary, _) = self.show_group()?.ok_or(WorkerError::NoReconstruction)?;
-            return Ok(summary);
+        let Some(run) = self.begin_group_reconstruction()? else {
+            return self.reconstruct_open_session(ego_only_overlay, progress);
+        };
+        for id in &run.participants {
+            self.open_participant_for_reconstruction(id)?;
+            self.reconstruct_open_session(ego_only_overlay, progress)?;
         }
-        self.reconstruct_open_session(ego_only_overlay, progress)
+        Ok(self.finish_group_reconstruction(run)?.0)
     }
 
     fn reconstruct_open_session(
@@ -769,9 +755,6 @@ impl SessionWorker {
         if take.wearers().len() > 1 {
             // Several wearers: the take is a capture of them all, opened like a dropped one.
             let (capture, warnings) = take.to_capture(name)?;
-            self.session = None;
-            self.results = None;
-            self.group = None;
             let imported = egoexo_session::import::ImportedCapture {
                 capture,
                 source: egoexo_session::SourceKind::Egoexo,
@@ -788,9 +771,9 @@ impl SessionWorker {
         let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
         // A capture of several participants is saved whole (version 3), with every keypoint
         // the detector step found.
-        if let (Some(capture), Some(name)) = (self.capture_egoexo(true), self.capture_name()) {
+        if let Some((name, bytes)) = self.capture_zip(true) {
             return Ok(ExportedFile {
-                bytes: capture?,
+                bytes: bytes.map_err(|e| WorkerError::SaveSession(e.to_string()))?,
                 file_name: format!("{}.egoexo", file_name(&name)),
                 mime_type: "application/zip",
             });
@@ -840,13 +823,15 @@ impl SessionWorker {
     /// open here. `created_by` names the app (`egoexo 0.1.0 (page)`).
     pub fn pack_share(&self, include_recording: bool, created_by: &str) -> Result<Vec<u8>, WorkerError> {
         let results = self.results.as_ref().ok_or(WorkerError::NoReconstruction)?;
+        // The recording: a capture of several participants whole, else the open session.
         let session_egoexo = match (&self.session, include_recording) {
-            (Some(_), true) if self.capture_name().is_some() => {
-                self.capture_egoexo(false).transpose().map_err(|e| WorkerError::ShareRecording(e.to_string()))?
-            }
-            (Some(open), true) => {
-                Some(write_egoexo_zip(&open.imported.session).map_err(|e| WorkerError::ShareRecording(e.to_string()))?)
-            }
+            (Some(open), true) => Some(
+                match self.capture_zip(false) {
+                    Some((_, bytes)) => bytes,
+                    None => write_egoexo_zip(&open.imported.session),
+                }
+                .map_err(|e| WorkerError::ShareRecording(e.to_string()))?,
+            ),
             _ => None,
         };
         let contents = ShareContents {
@@ -886,16 +871,7 @@ impl SessionWorker {
             session: manifest.session.clone(),
             made_here: None,
         });
-        let shown = manifest.summary.participant.clone();
-        self.open_shared_participants(contents.participants, shown.as_deref())?;
-        if let Some(id) = &shown
-            && self.session.is_some()
-        {
-            // The recording opened as a capture: its session is the shown participant's.
-            let results = self.results.clone();
-            self.open_participant_for_reconstruction(id)?;
-            self.results = results;
-        }
+        self.open_shared_participants(contents.participants, manifest.summary.participant.as_deref())?;
         Ok(OpenedShare { manifest, scene_json: contents.scene_json })
     }
 }

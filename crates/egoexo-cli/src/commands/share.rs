@@ -148,9 +148,7 @@ fn reshare(folder: &std::path::Path, include_recording: bool) -> Result<(Vec<u8>
             serde_json::from_slice(&read(&container::participant_entry(id, container::MOTION_FILE)?)?)
                 .with_context(|| format!("{}: participant `{id}`'s motion", folder.display()))?;
         participants.push(egoexo_share::SharedParticipant {
-            summary: entry.participant.clone(),
-            reconstruction: entry.summary.clone(),
-            session: entry.session.clone(),
+            entry: entry.clone(),
             scene_json: read(&container::participant_entry(id, container::SCENE_FILE)?)?,
             motion,
         });
@@ -237,7 +235,7 @@ fn run_get(args: GetArgs) -> Result<()> {
     }
     // A capture: every participant's scene, motion and exports (the exports named by them).
     for p in &contents.participants {
-        let id = &p.summary.id;
+        let id = &p.entry.participant.id;
         files.push((
             egoexo_share::container::participant_entry(id, egoexo_share::container::SCENE_FILE)?,
             p.scene_json.clone(),

@@ -14,9 +14,11 @@ use egoexo_detect::people::{CoarseParticipant, ViewAssociation, associate_views}
 use egoexo_protocol::worker::{AssociationSummary, ParticipantResult, ParticipantSummary};
 use egoexo_scene::{SceneData, SceneParticipant};
 use egoexo_session::capture::{Capture, View, ViewPeople};
+use egoexo_session::format::WriteError;
 use egoexo_session::import::ImportedCapture;
 use egoexo_session::model::KeypointTrack;
 use egoexo_session::{ImportWarning, SourceKind};
+use egoexo_share::container::SharedParticipantEntry;
 
 use super::*;
 
@@ -96,6 +98,15 @@ impl Group {
     }
 }
 
+/// A capture's reconstruction under way ([`SessionWorker::begin_group_reconstruction`]).
+#[derive(Debug)]
+pub struct GroupReconstruction {
+    /// The participants to reconstruct, in the capture's order.
+    pub participants: Vec<String>,
+    /// Who was shown when it began (shown again at the end).
+    shown: Option<String>,
+}
+
 /// What a `select-participant` shows.
 #[derive(Debug)]
 pub struct SelectedParticipant {
@@ -153,6 +164,9 @@ impl SessionWorker {
         imported: ImportedCapture,
         timings: StageTimings,
     ) -> Result<SessionSummary, WorkerError> {
+        self.session = None;
+        self.results = None;
+        self.group = None;
         if imported.capture.is_one_session() {
             let wearer = imported.capture.reconstructed().next().ok_or(WorkerError::NoSession)?;
             let session = imported.capture.session_for(wearer)?;
@@ -184,9 +198,7 @@ impl SessionWorker {
         let session = capture.session_for(index)?;
         let imported = Imported { session, source: group.source, warnings: group.warnings.clone() };
         let aligned = self.timed(&mut timings, TimedStage::Align, || align_for(&imported, fps))?;
-        let mut summary = session_summary(&imported, &aligned, &group.videos);
-        summary.participants = group.participants.clone();
-        summary.participant = Some(group.participants[index].id.clone());
+        let summary = self.with_group(session_summary(&imported, &aligned, &group.videos));
         self.session = Some(OpenSession {
             imported,
             aligned,
@@ -206,6 +218,42 @@ impl SessionWorker {
             return Vec::new();
         }
         group.participants.iter().filter(|p| p.reconstruct).map(|p| p.id.clone()).collect()
+    }
+
+    /// `summary` (of the open session) with the capture's participants and who is shown, when
+    /// a capture of several is open.
+    pub(super) fn with_group(&self, mut summary: SessionSummary) -> SessionSummary {
+        if let Some(group) = &self.group {
+            summary.participants = group.participants.clone();
+            summary.participant = Some(group.participants[group.selected].id.clone());
+        }
+        summary
+    }
+
+    /// Starts reconstructing everyone in the open capture: the association (once), then the
+    /// participants to reconstruct in turn — open each with
+    /// [`Self::open_participant_for_reconstruction`] and run the usual job on it — and end
+    /// with [`Self::finish_group_reconstruction`]. `None` for a one-wearer session.
+    pub fn begin_group_reconstruction(&mut self) -> Result<Option<GroupReconstruction>, WorkerError> {
+        let participants = self.participants_to_reconstruct();
+        if participants.is_empty() {
+            return Ok(None);
+        }
+        let shown = self.session_summary().and_then(|s| s.participant);
+        self.associate_people()?;
+        Ok(Some(GroupReconstruction { participants, shown }))
+    }
+
+    /// Shows again the participant shown when `run` began, everyone drawn: their summary
+    /// (with everyone's rows) and scene JSON.
+    pub fn finish_group_reconstruction(
+        &mut self,
+        run: GroupReconstruction,
+    ) -> Result<(ReconstructionSummary, Vec<u8>), WorkerError> {
+        if let Some(id) = &run.shown {
+            self.open_participant_for_reconstruction(id)?;
+        }
+        self.show_group()?.ok_or(WorkerError::NoReconstruction)
     }
 
     /// Opens participant `id` as the session for the next steps of a capture's
@@ -308,14 +356,15 @@ impl SessionWorker {
 
     /// Keypoints the detector step found for the shown participant in `observer`'s video go
     /// into the capture too.
-    pub(super) fn keep_detected_keypoints(&mut self, observer: &str, keypoints: &KeypointTrack) {
+    pub(super) fn keep_detected_keypoints(&mut self, observer: &str, keypoints: KeypointTrack) {
         if let Some(group) = &mut self.group {
-            group.assign_keypoints(observer, keypoints.clone());
+            group.assign_keypoints(observer, keypoints);
         }
     }
 
-    /// The open capture as a `.egoexo` (version 3) with its videos, when a capture is open.
-    pub(super) fn capture_egoexo(&self, with_videos: bool) -> Option<Result<Vec<u8>, WorkerError>> {
+    /// The open capture (when one is open) as a `.egoexo` of version 3, with its videos when
+    /// `with_videos`: its name and the bytes.
+    pub(super) fn capture_zip(&self, with_videos: bool) -> Option<(String, Result<Vec<u8>, WriteError>)> {
         let group = self.group.as_ref()?;
         let capture = group.capture.as_ref()?;
         let videos = if with_videos {
@@ -323,15 +372,7 @@ impl SessionWorker {
         } else {
             BTreeMap::new()
         };
-        Some(
-            egoexo_session::format::write_capture_zip(capture, videos)
-                .map_err(|e| WorkerError::SaveSession(e.to_string())),
-        )
-    }
-
-    /// The capture's name, when one is open.
-    pub(super) fn capture_name(&self) -> Option<String> {
-        Some(self.group.as_ref()?.capture.as_ref()?.name.clone())
+        Some((capture.name.clone(), egoexo_session::format::write_capture_zip(capture, videos)))
     }
 
     /// Every reconstructed participant's part of what is shown, for a share.
@@ -341,17 +382,20 @@ impl SessionWorker {
             .results
             .iter()
             .map(|(&i, r)| egoexo_share::SharedParticipant {
-                summary: group.participants[i].clone(),
-                reconstruction: r.summary.clone(),
-                session: r.session.clone(),
+                entry: SharedParticipantEntry {
+                    participant: group.participants[i].clone(),
+                    summary: r.summary.clone(),
+                    session: r.session.clone(),
+                },
                 scene_json: r.scene_json.clone(),
                 motion: r.motion.clone(),
             })
             .collect()
     }
 
-    /// Opens the participants of a share: a group of their results (the capture too, when
-    /// the share's recording opened one), the shared one shown.
+    /// Opens the participants of a share: a group of their results (with the capture, when
+    /// the share's recording opened one), the shared one shown — and, with the capture, their
+    /// session open.
     pub(super) fn open_shared_participants(
         &mut self,
         shared: Vec<egoexo_share::SharedParticipant>,
@@ -366,7 +410,7 @@ impl SessionWorker {
                 source: SourceKind::Egoexo,
                 warnings: Vec::new(),
                 videos: BTreeMap::new(),
-                participants: shared.iter().map(|p| p.summary.clone()).collect(),
+                participants: shared.iter().map(|p| p.entry.participant.clone()).collect(),
                 selected: 0,
                 association: None,
                 results: BTreeMap::new(),
@@ -374,14 +418,14 @@ impl SessionWorker {
         }
         let group = self.group.as_mut().ok_or(WorkerError::NoSession)?;
         for p in shared {
-            let index = group.index_of(&p.summary.id)?;
+            let index = group.index_of(&p.entry.participant.id)?;
             let results = Results {
-                name: p.session.name.clone(),
-                method: p.reconstruction.method.clone(),
+                name: p.entry.session.name.clone(),
+                method: p.entry.summary.method.clone(),
                 motion: p.motion,
                 scene_json: p.scene_json,
-                summary: p.reconstruction,
-                session: p.session,
+                summary: p.entry.summary,
+                session: p.entry.session,
                 made_here: None,
             };
             group.results.insert(index, results);
@@ -389,8 +433,11 @@ impl SessionWorker {
         if let Some(id) = shown {
             group.selected = group.index_of(id)?;
         }
-        if self.results.as_ref().is_some_and(|r| r.summary.participant.is_some()) {
-            group.association = self.results.as_ref().map(|r| r.summary.association.clone());
+        // The association came with the shown participant's summary.
+        group.association = self.results.as_ref().map(|r| r.summary.association.clone());
+        if group.capture.is_some() {
+            let selected = group.selected;
+            self.open_participant(selected, StageTimings::default())?;
         }
         Ok(())
     }

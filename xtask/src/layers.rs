@@ -12,6 +12,7 @@ pub const LAYERS: &[(&str, &[&str])] = &[
     ("egoexo-motion-io", &["egoexo-core"]),
     ("egoexo-scene", &["egoexo-core"]),
     ("egoexo-infer", &["egoexo-core"]),
+    ("egoexo-solve", &["egoexo-core"]),
     ("egoexo-session", &["egoexo-core", "egoexo-protocol", "egoexo-motion-io"]),
     ("egoexo-mocap", &["egoexo-core", "egoexo-motion-io"]),
     ("egoexo-server", &["egoexo-core", "egoexo-protocol"]),

@@ -7,6 +7,7 @@
 use glam::{Quat, Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 
+use crate::rigid::RigidTransform;
 use crate::skeleton::SmplJoint;
 
 /// Number of exocentric keypoints per observer and frame (the paper's K).
@@ -146,6 +147,57 @@ pub fn exo_keypoints_from_smpl(
         ExoKeypoint::Nose => positions[SmplJoint::Head.index()] + head_rotation * (NOSE_IN_HEAD_JOINT * skeleton_scale),
         other => positions[other.smpl_joint().index()],
     })
+}
+
+/// Eyes and ears in the SMPL head joint's frame (mean shape, metres; Y up, facing +Z, left +X),
+/// by COCO-17 index. Scaled with the skeleton.
+pub const FACE_POINTS_IN_HEAD_JOINT: [(usize, Vec3); 4] = [
+    (1, Vec3::new(0.032, 0.035, 0.085)),  // left eye
+    (2, Vec3::new(-0.032, 0.035, 0.085)), // right eye
+    (3, Vec3::new(0.075, 0.01, 0.0)),     // left ear
+    (4, Vec3::new(-0.075, 0.01, 0.0)),    // right ear
+];
+
+/// The 17 COCO keypoints' world positions from the 13 exo keypoints and the head joint's world
+/// pose `T_world_headjoint` (eyes and ears at [`FACE_POINTS_IN_HEAD_JOINT`] × `scale`).
+pub fn coco17_from_exo(
+    exo_points: &[Vec3; EXO_KEYPOINT_COUNT],
+    head_joint: &RigidTransform,
+    scale: f32,
+) -> [Vec3; COCO17_COUNT] {
+    let mut points = [Vec3::ZERO; COCO17_COUNT];
+    for k in ExoKeypoint::ALL {
+        points[k.coco17_index()] = exo_points[k.index()];
+    }
+    for (index, offset) in FACE_POINTS_IN_HEAD_JOINT {
+        points[index] = head_joint.transform_point(offset * scale);
+    }
+    points
+}
+
+/// The head joint's world pose `T_world_headjoint` of glasses tracked at `T_world_device`
+/// whose frame (CPF: +X left, +Y up, +Z forward, the head joint's own axes) holds the head
+/// joint at `head_joint_in_device` (metres).
+pub fn head_joint_from_device(t_world_device: &RigidTransform, head_joint_in_device: Vec3) -> RigidTransform {
+    *t_world_device * RigidTransform::from_translation(head_joint_in_device)
+}
+
+/// The glasses' `T_world_device` for a head joint at `T_world_headjoint` (the inverse of
+/// [`head_joint_from_device`]).
+pub fn device_from_head_joint(t_world_head_joint: &RigidTransform, head_joint_in_device: Vec3) -> RigidTransform {
+    *t_world_head_joint * RigidTransform::from_translation(-head_joint_in_device)
+}
+
+/// The five face keypoints (COCO-17 nose, eyes, ears: indices 0–4) in the world that a head
+/// device at `T_world_device` fixes by itself: exact up to the wearer's face, with no body
+/// pose needed. `scale` is the skeleton's size against the mean shape.
+pub fn face_points_from_device(t_world_device: &RigidTransform, head_joint_in_device: Vec3, scale: f32) -> [Vec3; 5] {
+    let head = head_joint_from_device(t_world_device, head_joint_in_device);
+    let mut points = [head.transform_point(NOSE_IN_HEAD_JOINT * scale); 5];
+    for (index, offset) in FACE_POINTS_IN_HEAD_JOINT {
+        points[index] = head.transform_point(offset * scale);
+    }
+    points
 }
 
 #[cfg(test)]

@@ -9,37 +9,13 @@
 //! Pixels in the observer's RGB image (centre of the top-left pixel at 0, 0); world Y-up, metres.
 
 use egoexo_core::camera::CameraCalibration;
-use egoexo_core::exo_keypoints::{COCO17_COUNT, EXO_KEYPOINT_COUNT, ExoKeypoint, Keypoint2d};
+use egoexo_core::exo_keypoints::{COCO17_COUNT, ExoKeypoint, Keypoint2d};
 use egoexo_core::glam::{Vec2, Vec3};
 use egoexo_core::rigid::RigidTransform;
 
 use crate::config::DetectorModel;
 use crate::rng::SimRng;
 use crate::scene::Scene;
-
-/// Eyes and ears in the SMPL head joint's frame (mean shape, metres; Y up, facing +Z, left +X).
-const FACE_POINTS_IN_HEAD_JOINT: [(usize, Vec3); 4] = [
-    (1, Vec3::new(0.032, 0.035, 0.085)),  // left eye
-    (2, Vec3::new(-0.032, 0.035, 0.085)), // right eye
-    (3, Vec3::new(0.075, 0.01, 0.0)),     // left ear
-    (4, Vec3::new(-0.075, 0.01, 0.0)),    // right ear
-];
-
-/// The 17 COCO keypoints' world positions from the 13 exo keypoints and the head joint pose.
-pub fn coco17_points(
-    exo_points: &[Vec3; EXO_KEYPOINT_COUNT],
-    head_joint: &RigidTransform,
-    scale: f32,
-) -> [Vec3; COCO17_COUNT] {
-    let mut points = [Vec3::ZERO; COCO17_COUNT];
-    for k in ExoKeypoint::ALL {
-        points[k.coco17_index()] = exo_points[k.index()];
-    }
-    for (index, offset) in FACE_POINTS_IN_HEAD_JOINT {
-        points[index] = head_joint.transform_point(offset * scale);
-    }
-    points
-}
 
 /// COCO index → exo keypoint index (the four face points have none).
 fn exo_index_of_coco(coco: usize) -> Option<usize> {

@@ -11,12 +11,6 @@ use egoexo_core::rigid::RigidTransform;
 use crate::config::{DeviceNoise, HandTrackingModel};
 use crate::rng::SimRng;
 
-/// `T_world_device` of glasses whose frame has the head joint at `head_joint_in_device`
-/// (metres), given the head joint's world pose `T_world_headjoint`.
-pub fn glasses_pose(t_world_head_joint: &RigidTransform, head_joint_in_device: Vec3) -> RigidTransform {
-    *t_world_head_joint * RigidTransform::from_translation(-head_joint_in_device)
-}
-
 /// Adds tracking error to a true trajectory sampled at `fps`: white position/orientation
 /// jitter plus slowly drifting position and heading (random walks).
 pub fn add_tracking_noise(

@@ -9,7 +9,9 @@
 //! World Y-up, metres, seconds; deterministic from the seed.
 
 use egoexo_core::TrackingMode;
-use egoexo_core::exo_keypoints::{COCO17_COUNT, Keypoint2d, exo_keypoints_from_smpl};
+use egoexo_core::exo_keypoints::{
+    COCO17_COUNT, Keypoint2d, coco17_from_exo, device_from_head_joint, exo_keypoints_from_smpl,
+};
 use egoexo_core::glam::{Quat, Vec3};
 use egoexo_core::motion::SmplMotion;
 use egoexo_core::rigid::RigidTransform;
@@ -20,8 +22,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::cameras::{aria_rgb_camera, wide_pinhole_camera};
 use crate::config::{CameraChoice, DetectorModel, DeviceNoise};
-use crate::detector::{DetectorState, coco17_points, detect};
-use crate::devices::{add_tracking_noise, glasses_pose};
+use crate::detector::{DetectorState, detect};
+use crate::devices::add_tracking_noise;
 use crate::procedural::{walking_circle_around, walking_line};
 use crate::rng::SimRng;
 use crate::scene::{Scene, Walker};
@@ -222,8 +224,9 @@ pub fn simulate_group(
         let pose = |f: usize, j: SmplJoint| {
             RigidTransform::new(frames_fk[f].rotations[j.index()], frames_fk[f].positions[j.index()])
         };
-        let head_truth: Vec<_> =
-            (0..frames).map(|f| glasses_pose(&pose(f, SmplJoint::Head), DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE)).collect();
+        let head_truth: Vec<_> = (0..frames)
+            .map(|f| device_from_head_joint(&pose(f, SmplJoint::Head), DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE))
+            .collect();
         let head = add_tracking_noise(&head_truth, fps, &config.device_noise, &mut prng);
         let mut wrist = |j: SmplJoint| {
             let truth: Vec<_> = (0..frames).map(|f| pose(f, j)).collect();
@@ -302,7 +305,7 @@ pub fn simulate_group(
                     joints.positions[SmplJoint::Head.index()],
                 );
                 let exo = exo_keypoints_from_smpl(&joints.positions, head_joint.rotation, scale);
-                let points = coco17_points(&exo, &head_joint, scale);
+                let points = coco17_from_exo(&exo, &head_joint, scale);
                 let detection = detect(
                     &points,
                     &camera,

@@ -1,7 +1,7 @@
 //! Putting it together: a full [`Session`] (with ground truth) from an SMPL motion clip.
 
 use egoexo_core::TrackingMode;
-use egoexo_core::exo_keypoints::exo_keypoints_from_smpl;
+use egoexo_core::exo_keypoints::{coco17_from_exo, device_from_head_joint, exo_keypoints_from_smpl};
 use egoexo_core::glam::Vec3;
 use egoexo_core::motion::SmplMotion;
 use egoexo_core::rigid::RigidTransform;
@@ -16,8 +16,8 @@ use thiserror::Error;
 use crate::cameras::{aria_rgb_camera, wide_pinhole_camera};
 use crate::config::SynthConfig;
 use crate::config::WristTracking;
-use crate::detector::{DetectorState, coco17_points, detect};
-use crate::devices::{add_tracking_noise, glasses_pose, simulate_hand_tracking};
+use crate::detector::{DetectorState, detect};
+use crate::devices::{add_tracking_noise, simulate_hand_tracking};
 use crate::observers::simulate_observer;
 use crate::rng::SimRng;
 use crate::scene::{Bystander, Furniture, Scene};
@@ -94,7 +94,7 @@ pub fn simulate(
     // Wearer devices.
     let head_joint_in_device = DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE;
     let true_head: Vec<_> =
-        (0..fk.len()).map(|f| glasses_pose(&joint_pose(f, SmplJoint::Head), head_joint_in_device)).collect();
+        (0..fk.len()).map(|f| device_from_head_joint(&joint_pose(f, SmplJoint::Head), head_joint_in_device)).collect();
     let mut wearer_rng = rng.fork(1);
     let head = add_tracking_noise(&true_head, fps, &config.wearer_noise, &mut wearer_rng);
     let mut wrist_source = WristSource::Devices;
@@ -182,7 +182,7 @@ pub fn simulate(
         for (f, joints) in fk.iter().enumerate() {
             let head_rot = joints.rotations[SmplJoint::Head.index()];
             let exo = exo_keypoints_from_smpl(&joints.positions, head_rot, scale);
-            let points = coco17_points(&exo, &joint_pose(f, SmplJoint::Head), scale);
+            let points = coco17_from_exo(&exo, &joint_pose(f, SmplJoint::Head), scale);
             let t = f as f32 / fps;
             let det = detect(&points, &camera, &track.head[f], &scene, t, &config.detector, &mut detector, &mut orng);
             report.frames_in_view += usize::from(det.in_view >= config.detector.min_keypoints_in_view);

@@ -4,13 +4,13 @@ mod common;
 
 use common::*;
 use egoexo_core::TrackingMode;
+use egoexo_core::exo_keypoints::coco17_from_exo;
 use egoexo_core::exo_keypoints::{EXO_KEYPOINT_COUNT, ExoKeypoint, exo_keypoints_from_smpl};
 use egoexo_core::glam::Vec3;
 use egoexo_core::rigid::RigidTransform;
 use egoexo_core::rotation::angle_between;
 use egoexo_core::skeleton::SmplJoint;
 use egoexo_synth::config::{DeviceNoise, SynthConfig};
-use egoexo_synth::detector::coco17_points;
 use egoexo_synth::{SimulatedSession, simulate};
 
 fn clean_config() -> SynthConfig {
@@ -390,7 +390,7 @@ fn several_observers_get_distinct_ids_cameras_and_views() {
     assert_eq!(ids, ["observer-1", "observer-2", "observer-3"]);
     assert_eq!(sim.session.ground_truth.as_ref().unwrap().occlusion.len(), 3);
     assert_ne!(sim.true_observer_heads[0][0].translation, sim.true_observer_heads[1][0].translation);
-    let _ = (RigidTransform::IDENTITY, coco17_points);
+    let _ = (RigidTransform::IDENTITY, coco17_from_exo);
 }
 
 /// Hand tracking from the glasses: a wrist is reported only where it was inside the view

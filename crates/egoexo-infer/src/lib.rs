@@ -18,6 +18,8 @@
 //! - [`models`] — ONNX models loaded from bytes and run by tract, [`LoadedModels`] (the
 //!   offline networks and the live variants per lookahead); [`manifest`] — `models/manifest.json`.
 //! - [`baselines`] — rest pose and nearest neighbour.
+//! - [`coarse`] — EgoNet's coarse body on a few chosen windows (for steps before the
+//!   reconstruction, such as registering observers).
 //! - [`timing`] — time per stage, with a clock the caller passes in; [`cost`] — FLOPs per
 //!   network run and a plain matrix-product probe of the same shapes.
 //!
@@ -25,6 +27,7 @@
 //! same engine runs in the browser's Web Worker.
 
 pub mod baselines;
+pub mod coarse;
 pub mod cost;
 pub mod decode;
 pub mod detector;
@@ -38,6 +41,7 @@ pub mod plan;
 pub mod timing;
 pub mod windows;
 
+pub use coarse::CoarseBody;
 pub use detector::{CropKeypoint, DetectorManifest, KeypointDetector};
 pub use engine::{Engine, Method, ObserverGates, Progress, ReconstructOptions, Reconstruction, Stage};
 pub use job::{ChunkOutputs, ReconstructionJob};

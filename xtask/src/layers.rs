@@ -13,7 +13,7 @@ pub const LAYERS: &[(&str, &[&str])] = &[
     ("egoexo-scene", &["egoexo-core"]),
     ("egoexo-infer", &["egoexo-core"]),
     ("egoexo-solve", &["egoexo-core"]),
-    ("egoexo-session", &["egoexo-core", "egoexo-protocol", "egoexo-motion-io"]),
+    ("egoexo-session", &["egoexo-core", "egoexo-protocol", "egoexo-motion-io", "egoexo-solve"]),
     ("egoexo-mocap", &["egoexo-core", "egoexo-motion-io"]),
     ("egoexo-server", &["egoexo-core", "egoexo-protocol"]),
     ("egoexo-synth", &["egoexo-core", "egoexo-session"]),

@@ -163,17 +163,24 @@ pub fn align_on_timeline(
 
     let mut observers = Vec::with_capacity(session.observers.len());
     for observer in &session.observers {
-        let head = resample_trajectory(&observer.head, &times, options.max_gap_ns);
+        // An observer not known to share the wearer's world and clock (`placement`) keeps its
+        // slot (indices follow the session's) but brings nothing: no tracked frame, no
+        // keypoint, no feature — its rays would be drawn from the wrong place.
+        let fused = observer.placement.fusable();
+        let mut head = resample_trajectory(&observer.head, &times, options.max_gap_ns);
+        if !fused {
+            head.valid.fill(false);
+        }
         cover(format!("{}/head", observer.id), count(&head.valid));
         let keypoints: Vec<[Option<Keypoint2d>; EXO_KEYPOINT_COUNT]> = match &observer.keypoints {
-            Some(track) => times
+            Some(track) if fused => times
                 .iter()
                 .map(|&t| match nearest(&track.timestamps_ns, t, tolerance) {
                     Some(i) => track.frames.get(i).map_or([None; EXO_KEYPOINT_COUNT], exo_from_coco17),
                     None => [None; EXO_KEYPOINT_COUNT],
                 })
                 .collect(),
-            None => vec![[None; EXO_KEYPOINT_COUNT]; timeline.frames],
+            _ => vec![[None; EXO_KEYPOINT_COUNT]; timeline.frames],
         };
         if observer.keypoints.is_some() {
             cover(
@@ -181,7 +188,7 @@ pub fn align_on_timeline(
                 keypoints.iter().filter(|f| f.iter().any(Option::is_some)).count(),
             );
         }
-        let context_features = observer.context_features.as_ref().map(|track| {
+        let context_features = observer.context_features.as_ref().filter(|_| fused).map(|track| {
             times
                 .iter()
                 .map(|&t| {
@@ -372,7 +379,36 @@ mod tests {
             }),
             video: None,
             context_features: None,
+            placement: crate::placement::Placement::default(),
         }
+    }
+
+    #[test]
+    fn an_observer_in_its_own_world_brings_nothing_until_registered() {
+        use crate::placement::{ClockRef, Placement, RegistrationRecord, WorldRef};
+        use egoexo_solve::registration::{Registration, RegistrationStatus};
+        let times: Vec<i64> = (0..=1000).step_by(10).collect();
+        let mut s = session(trajectory(&times));
+        for id in ["shared", "own", "own-clock", "registered", "inconsistent"] {
+            s.observers.push(observer(id, trajectory(&times), &[100, 500, 900]));
+        }
+        s.observers[1].placement.world = WorldRef::Own;
+        s.observers[2].placement.clock = ClockRef::Own;
+        let record = |status| RegistrationRecord {
+            result: Registration { status, ..Registration::as_given(90, 80, 3.0, 2.7, None, String::new()) },
+            applied: true,
+        };
+        s.observers[3].placement =
+            Placement { registration: Some(record(RegistrationStatus::Registered)), ..Placement::default() };
+        s.observers[4].placement =
+            Placement { registration: Some(record(RegistrationStatus::Inconsistent)), ..Placement::default() };
+        let a = align(&s, &AlignOptions::default()).unwrap();
+        let brings = |o: usize| {
+            a.observers[o].head.valid.iter().any(|&v| v)
+                && a.observers[o].keypoints.iter().flatten().any(Option::is_some)
+        };
+        assert_eq!((0..5).map(brings).collect::<Vec<_>>(), [true, false, false, true, false]);
+        assert_eq!(a.observers.len(), 5, "indices follow the session's");
     }
 
     #[test]

@@ -25,6 +25,7 @@ use crate::model::{
     ContextFeatureTrack, Floor, GroundTruth, KeypointTrack, Observer, Session, SubjectInfo, Trajectory, VideoRef,
     Wearer, WristSource,
 };
+use crate::placement::{ClockRef, Placement, WorldRef};
 
 /// The participant id a one-wearer session's wearer gets in a capture.
 pub const WEARER_ID: &str = "wearer";
@@ -75,6 +76,10 @@ pub struct Participant {
     /// This participant's true motion (simulated captures).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ground_truth: Option<GroundTruth>,
+    /// Their devices' world and clock against the capture's (the first participant's, or the
+    /// registration anchor's), and any registration ([`crate::placement`]).
+    #[serde(default, skip_serializing_if = "Placement::is_default")]
+    pub placement: Placement,
 }
 
 /// What one participant's camera saw.
@@ -141,6 +146,7 @@ impl Participant {
             context_features: None,
             subject,
             ground_truth,
+            placement: Placement::default(),
         }
     }
 
@@ -161,6 +167,7 @@ impl Participant {
             context_features: observer.context_features.clone(),
             subject: SubjectInfo::default(),
             ground_truth: None,
+            placement: observer.placement.clone(),
         }
     }
 }
@@ -272,6 +279,7 @@ impl Capture {
                     keypoints: self.assigned_keypoints(&o.id, &p.id).cloned(),
                     video: o.video.clone(),
                     context_features: o.context_features.clone(),
+                    placement: placement_seen_from(&p.placement, &o.placement),
                 })
             })
             .collect();
@@ -292,6 +300,25 @@ impl Capture {
             floor: self.floor.clone(),
         })
     }
+}
+
+/// An observer's placement in the session of a wearer: both placements are against the
+/// capture's world. When the wearer's world is the capture's, the observer's placement as it
+/// is; when it is the wearer's own, the observer's world (and clock) is another: a
+/// registration into the capture's world says nothing of the wearer's own.
+fn placement_seen_from(wearer: &Placement, observer: &Placement) -> Placement {
+    if wearer.world == WorldRef::Shared && wearer.clock == ClockRef::Shared {
+        return observer.clone();
+    }
+    let mut seen = observer.clone();
+    if wearer.world == WorldRef::Own {
+        seen.world = WorldRef::Own;
+        seen.registration = None;
+    }
+    if wearer.clock == ClockRef::Own {
+        seen.clock = ClockRef::Own;
+    }
+    seen
 }
 
 #[cfg(test)]
@@ -339,6 +366,7 @@ mod tests {
                     keypoints: (i == 0).then(|| keypoints(10.0)),
                     video: None,
                     context_features: None,
+                    placement: Placement::default(),
                 })
                 .collect(),
             subject: SubjectInfo { height_m: Some(1.8), ..Default::default() },

@@ -48,6 +48,7 @@ use crate::model::{
     ContextFeatureTrack, Floor, GroundTruth, Observer, ObserverOcclusion, Session, SubjectInfo, Trajectory, VideoRef,
     Wearer, WristSource,
 };
+use crate::placement::{Mount, Placement, WorldRef, spread_fixed_poses, spread_fixed_poses_in_capture};
 use egoexo_motion_io::npz::NpzWriter;
 
 use crate::npz::{NpyArray, NpyData, Npz};
@@ -118,9 +119,19 @@ pub fn write_egoexo_files(session: &Session) -> Result<BTreeMap<String, Vec<u8>>
     let mut observers = Vec::new();
     for observer in &session.observers {
         let dir = format!("observers/{}", observer.id);
-        let trajectory = format!("{dir}/closed_loop_trajectory.csv");
-        put_trajectory(&mut files, trajectory.clone(), &observer.head);
-        let mut entry = json!({"id": observer.id, "trajectory": trajectory, "camera": camera_json(&observer.camera)});
+        let mut entry = json!({"id": observer.id, "camera": camera_json(&observer.camera)});
+        match placement_poses_json(&observer.placement, &observer.head)? {
+            PosesJson::Trajectory => {
+                let trajectory = format!("{dir}/closed_loop_trajectory.csv");
+                put_trajectory(&mut files, trajectory.clone(), &observer.head);
+                entry["trajectory"] = json!(trajectory);
+            }
+            PosesJson::Pose(pose) => entry["pose"] = pose,
+            PosesJson::None => {}
+        }
+        if !observer.placement.is_default() {
+            entry["placement"] = placement_json(&observer.placement, &format!("{dir} placement"))?;
+        }
         if let Some(kp) = &observer.keypoints {
             let path = format!("{dir}/keypoints.jsonl");
             files.insert(path.clone(), write_keypoints_jsonl(&observer.id, kp).into_bytes());
@@ -257,6 +268,36 @@ fn f32s(values: &[f32]) -> Value {
 
 fn transform_json(t: &RigidTransform) -> Value {
     json!({"translation": f32s(&t.translation.to_array()), "rotation_xyzw": f32s(&t.rotation.to_array())})
+}
+
+/// How a device's poses are written: a trajectory file (a worn device), one `pose` (a static
+/// camera), or nothing (a static camera that knows no pose: its own world is its optical frame).
+enum PosesJson {
+    Trajectory,
+    Pose(Value),
+    None,
+}
+
+fn placement_poses_json(placement: &Placement, head: &Trajectory) -> Result<PosesJson, WriteError> {
+    if placement.mount == Mount::Worn {
+        return Ok(PosesJson::Trajectory);
+    }
+    let pose = head.poses.first().copied().unwrap_or(RigidTransform::IDENTITY);
+    if head.poses.iter().any(|p| *p != pose) {
+        return Err(WriteError::Encode {
+            what: "a static camera's poses".into(),
+            message: "a fixed mount has one pose; its trajectory moves".into(),
+        });
+    }
+    Ok(if placement.world == WorldRef::Own && pose == RigidTransform::IDENTITY {
+        PosesJson::None
+    } else {
+        PosesJson::Pose(transform_json(&pose))
+    })
+}
+
+fn placement_json(placement: &Placement, what: &str) -> Result<Value, WriteError> {
+    serde_json::to_value(placement).map_err(|e| WriteError::Encode { what: what.into(), message: e.to_string() })
 }
 
 fn camera_json(camera: &CameraCalibration) -> Value {
@@ -443,7 +484,9 @@ fn read_session_manifest(
         Some(v) => Some(read_floor(&ctx, v)?),
         None => None,
     };
-    Ok((Session { name, wearer, observers, subject, ground_truth, floor }, reader.warnings))
+    let mut session = Session { name, wearer, observers, subject, ground_truth, floor };
+    spread_fixed_poses(&mut session);
+    Ok((session, reader.warnings))
 }
 
 fn read_capture_manifest(
@@ -478,7 +521,8 @@ fn read_capture_manifest(
         Some(v) => Some(read_floor(&ctx, v)?),
         None => None,
     };
-    let capture = Capture { name, participants, views, floor };
+    let mut capture = Capture { name, participants, views, floor };
+    spread_fixed_poses_in_capture(&mut capture);
     capture
         .validate()
         .map_err(|e| ImportError::invalid(manifest_file, Location::File, "a consistent capture", e.to_string()))?;
@@ -512,10 +556,19 @@ pub fn write_capture_files(capture: &Capture) -> Result<BTreeMap<String, Vec<u8>
         let mut entry = json!({
             "id": p.id,
             "reconstruct": p.reconstruct,
-            "head": put_trajectory(format!("{dir}/head/closed_loop_trajectory.csv"), &p.head),
             "head_joint_in_device": f32s(&p.head_joint_in_device.to_array()),
             "subject": subject_json(&p.subject),
         });
+        match placement_poses_json(&p.placement, &p.head)? {
+            PosesJson::Trajectory => {
+                entry["head"] = put_trajectory(format!("{dir}/head/closed_loop_trajectory.csv"), &p.head);
+            }
+            PosesJson::Pose(pose) => entry["pose"] = pose,
+            PosesJson::None => {}
+        }
+        if !p.placement.is_default() {
+            entry["placement"] = placement_json(&p.placement, &format!("{dir} placement"))?;
+        }
         for (key, wrist) in [("left_wrist", &p.left_wrist), ("right_wrist", &p.right_wrist)] {
             if let Some(wrist) = wrist {
                 entry[key] = put_trajectory(format!("{dir}/{key}/closed_loop_trajectory.csv"), wrist);
@@ -746,6 +799,70 @@ impl ManifestReader<'_> {
         Ok(Wearer { head, left_wrist, right_wrist, wrist_source, head_joint_in_device })
     }
 
+    /// A device's poses and placement: `trajectory_key` (a worn device's trajectory file), or
+    /// `pose` (a static camera), or neither with `placement.mount: fixed` and `world: own` (a
+    /// static camera to register). A static camera's trajectory holds its pose once here;
+    /// [`spread_fixed_poses`] spans it over the recording once everything is read.
+    fn poses_and_placement(
+        &mut self,
+        v: &Value,
+        path: &str,
+        trajectory_key: &str,
+    ) -> Result<(Trajectory, Placement), ImportError> {
+        let ctx = self.ctx;
+        let placement_path = join(path, "placement");
+        let placement: Option<Placement> = match ctx.optional(v, path, "placement")? {
+            Some(p) => Some(serde_json::from_value(p.clone()).map_err(|e| {
+                ctx.invalid(
+                    &placement_path,
+                    format!("a placement {{world, gravity, clock, mount, focal_known, registration}} ({e})"),
+                    p,
+                )
+            })?),
+            None => None,
+        };
+        let trajectory = ctx.optional(v, path, trajectory_key)?;
+        let pose = ctx.optional(v, path, "pose")?;
+        let fixed = placement.as_ref().is_some_and(|p| p.mount == Mount::Fixed);
+        match (trajectory, pose) {
+            (Some(_), Some(p)) => Err(ctx.invalid(
+                &join(path, "pose"),
+                format!("either `{trajectory_key}` (a worn device) or `pose` (a static camera), not both"),
+                p,
+            )),
+            (Some(t), None) => {
+                if fixed {
+                    return Err(ctx.invalid(
+                        &join(&placement_path, "mount"),
+                        format!("`worn` for a device with a `{trajectory_key}` (a static camera has `pose`)"),
+                        &v["placement"]["mount"],
+                    ));
+                }
+                let trajectory = self.trajectory(t, &join(path, trajectory_key))?;
+                Ok((trajectory, placement.unwrap_or_default()))
+            }
+            (None, Some(p)) => {
+                let pose = self.transform(p, &join(path, "pose"))?;
+                let placement = Placement { mount: Mount::Fixed, ..placement.unwrap_or_default() };
+                Ok((Trajectory { timestamps_ns: vec![0], poses: vec![pose] }, placement))
+            }
+            (None, None) => match placement {
+                Some(placement) if fixed && placement.world == WorldRef::Own => {
+                    Ok((Trajectory { timestamps_ns: vec![0], poses: vec![RigidTransform::IDENTITY] }, placement))
+                }
+                _ => Err(ImportError::invalid(
+                    ctx.file,
+                    Location::Field(join(path, trajectory_key)),
+                    format!(
+                        "`{trajectory_key}` (a worn device), `pose` (a static camera), or `placement` with \
+                         `mount: fixed` and `world: own` (a static camera to register)"
+                    ),
+                    "none of them",
+                )),
+            },
+        }
+    }
+
     fn transform(&self, v: &Value, path: &str) -> Result<RigidTransform, ImportError> {
         let ctx = self.ctx;
         let t = ctx.f32_array::<3>(ctx.field(v, path, "translation")?, &join(path, "translation"))?;
@@ -813,7 +930,11 @@ impl ManifestReader<'_> {
 
     fn observer(&mut self, v: &Value, path: &str) -> Result<Observer, ImportError> {
         let ctx = self.ctx;
-        self.known_keys(v, path, &["id", "trajectory", "camera", "keypoints", "video", "context_features"]);
+        self.known_keys(
+            v,
+            path,
+            &["id", "trajectory", "pose", "placement", "camera", "keypoints", "video", "context_features"],
+        );
         let id_path = join(path, "id");
         let id = ctx.str(ctx.field(v, path, "id")?, &id_path)?.to_owned();
         if !crate::validate::is_valid_observer_id(&id) {
@@ -823,7 +944,7 @@ impl ManifestReader<'_> {
                 ctx.field(v, path, "id")?,
             ));
         }
-        let head = self.trajectory(ctx.field(v, path, "trajectory")?, &join(path, "trajectory"))?;
+        let (head, placement) = self.poses_and_placement(v, path, "trajectory")?;
         let camera = self.camera(ctx.field(v, path, "camera")?, &join(path, "camera"))?;
         let keypoints = match ctx.optional(v, path, "keypoints")? {
             Some(k) => {
@@ -843,7 +964,7 @@ impl ManifestReader<'_> {
             }
             None => None,
         };
-        Ok(Observer { id, head, camera, keypoints, video, context_features })
+        Ok(Observer { id, head, camera, keypoints, video, context_features, placement })
     }
 
     /// An RGB video reference `{path, start_ns, timestamps?}` of `owner`'s camera.
@@ -892,6 +1013,8 @@ impl ManifestReader<'_> {
                 "context_features",
                 "subject",
                 "ground_truth",
+                "pose",
+                "placement",
             ],
         );
         let id_path = join(path, "id");
@@ -907,7 +1030,7 @@ impl ManifestReader<'_> {
         let reconstruct = ctx.field(v, path, "reconstruct")?;
         let reconstruct =
             reconstruct.as_bool().ok_or_else(|| ctx.invalid(&reconstruct_path, "true or false", reconstruct))?;
-        let head = self.trajectory(ctx.field(v, path, "head")?, &join(path, "head"))?;
+        let (head, placement) = self.poses_and_placement(v, path, "head")?;
         let wrist = |key: &str| -> Result<Option<Trajectory>, ImportError> {
             ctx.optional(v, path, key)?.map(|w| self.trajectory(w, &join(path, key))).transpose()
         };
@@ -965,6 +1088,7 @@ impl ManifestReader<'_> {
             context_features,
             subject,
             ground_truth,
+            placement,
         })
     }
 

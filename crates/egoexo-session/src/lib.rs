@@ -12,6 +12,8 @@
 //! - [`aria`] — Aria conventions and MPS files (`closed_loop_trajectory.csv`,
 //!   `online_calibration.jsonl`, `time_sync.csv`, hand tracking, semidense points).
 //! - [`floor`] — the floor's height: from semidense points, or from the standing head.
+//! - [`placement`] — an observer's world, clock and mount against the session's, and what
+//!   registration found.
 //! - [`live`] — a live take: frames received from the relay gathered into a session.
 //! - [`keypoints`] — exo keypoint files: JSON lines (read/write) and COCO JSON (read).
 //! - [`npz`] — checked `.npz` reading (writing is `egoexo_motion_io::npz`).
@@ -36,6 +38,7 @@ pub mod keypoints;
 pub mod live;
 pub mod model;
 pub mod npz;
+pub mod placement;
 pub mod validate;
 pub mod vfs;
 pub mod video;

@@ -344,6 +344,7 @@ impl LiveTake {
                 keypoints: (!keypoints.frames.is_empty()).then_some(keypoints),
                 video: None,
                 context_features: None,
+                placement: crate::placement::Placement::default(),
             });
         }
         let session = Session {

@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 
 pub use crate::aria::hand_tracking::{HandTrackingForm, WristOrientation};
 pub use crate::floor::{Floor, FloorSource};
+pub use crate::placement::Placement;
 
 /// A recording: one wearer, zero or more observers, subject info, optional ground truth.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -159,6 +160,10 @@ pub struct Observer {
     /// Optional per-frame image context features (the paper's DINOv3 CLS token).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub context_features: Option<ContextFeatureTrack>,
+    /// Its world, clock and mount against the session's, and any registration
+    /// ([`crate::placement`]); the default: a worn device in the session's world and clock.
+    #[serde(default, skip_serializing_if = "Placement::is_default")]
+    pub placement: Placement,
 }
 
 /// Per-frame COCO-17 detections (pixels in the observer's RGB image, scores in [0, 1]).

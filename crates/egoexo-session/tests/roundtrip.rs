@@ -13,6 +13,7 @@ use egoexo_session::capture::{Capture, PeopleTrack, View, ViewPeople};
 use egoexo_session::format::{read_capture, read_egoexo, write_capture_files, write_egoexo_files, write_egoexo_zip};
 use egoexo_session::import::{ImportOptions, import_session};
 use egoexo_session::model::*;
+use egoexo_session::placement::{ClockRef, Mount, Placement, Registration, RegistrationRecord, WorldRef};
 use egoexo_session::{FileTree, Limits};
 use proptest::prelude::*;
 
@@ -93,9 +94,38 @@ fn context(start: i64) -> impl Strategy<Value = ContextFeatureTrack> {
 
 const START: i64 = 1_000_000_000;
 
+/// A worn device's placement: any world, gravity, clock and focal knowledge, sometimes with a
+/// registration record (static cameras: `format`'s own tests).
+fn placement() -> impl Strategy<Value = Placement> {
+    (any::<[bool; 5]>(), -180.0f64..180.0).prop_map(|([own, gravity, own_clock, focal_known, recorded], yaw)| {
+        Placement {
+            world: if own { WorldRef::Own } else { WorldRef::Shared },
+            gravity,
+            clock: if own_clock { ClockRef::Own } else { ClockRef::Shared },
+            mount: Mount::Worn,
+            focal_known,
+            registration: recorded.then(|| RegistrationRecord {
+                result: Registration {
+                    yaw_deg: yaw,
+                    sigma_yaw_deg: Some(0.5),
+                    ..Registration::as_given(120, 100, 4.0, 3.3, Some(0.7), "checked".into())
+                },
+                applied: own,
+            }),
+        }
+    })
+}
+
 fn observer(index: usize) -> impl Strategy<Value = Observer> {
-    (trajectory(START), camera(), prop::option::of(keypoints(START)), prop::option::of(context(START)), any::<bool>())
-        .prop_map(move |(head, camera, keypoints, context_features, video)| Observer {
+    (
+        trajectory(START),
+        camera(),
+        prop::option::of(keypoints(START)),
+        prop::option::of(context(START)),
+        any::<bool>(),
+        placement(),
+    )
+        .prop_map(move |(head, camera, keypoints, context_features, video, placement)| Observer {
             id: format!("obs-{index}"),
             head,
             camera,
@@ -107,6 +137,7 @@ fn observer(index: usize) -> impl Strategy<Value = Observer> {
                 frame_times_ns: if index % 2 == 1 { vec![START + 5, START + 38, START + 72] } else { Vec::new() },
             }),
             context_features,
+            placement,
         })
 }
 

@@ -6,6 +6,7 @@ mod support;
 use egoexo_session::capture::{PeopleTrack, View, ViewPeople};
 use egoexo_session::format::{read_capture, read_egoexo, write_capture_files, write_egoexo_files};
 use egoexo_session::import::{ImportOptions, import_session};
+use egoexo_session::placement::{Mount, Placement, Registration, RegistrationRecord, WorldRef};
 use serde_json::Value;
 use support::*;
 
@@ -66,7 +67,23 @@ fn written_manifests_validate() {
         m
     };
     assert!(!v.is_valid(&broken_capture), "a view with both a target and people");
+    // Placements: a static camera to register, a posed one, an own world with its registration.
+    let mut placed = read_egoexo(&tree("aria", egoexo_fixture_files())).unwrap().0;
+    placed.observers[0].placement = Placement::fixed_unposed(false);
+    placed.observers[0].head.poses.fill(egoexo_core::rigid::RigidTransform::IDENTITY);
+    placed.observers[1].placement = Placement {
+        world: WorldRef::Own,
+        registration: Some(RegistrationRecord {
+            result: Registration::as_given(300, 280, 10.0, 9.3, Some(0.6), "checked".into()),
+            applied: false,
+        }),
+        ..Placement::default()
+    };
+    let mut posed = placed.clone();
+    posed.observers[0].placement = Placement { mount: Mount::Fixed, ..Placement::default() };
     for (what, files) in [
+        ("placements", write_egoexo_files(&placed).unwrap()),
+        ("a posed static camera", write_egoexo_files(&posed).unwrap()),
         ("aria + ground truth", egoexo_fixture_files()),
         ("nymeria", write_egoexo_files(&nymeria).unwrap()),
         ("capture of three participants", capture_files),

@@ -263,6 +263,7 @@ pub fn simulate_group(
                 rest_joints: Some(*motion.skeleton.rest_joints()),
             },
             ground_truth: Some(GroundTruth { motion: motion.clone(), occlusion: Vec::new() }),
+            placement: egoexo_session::placement::Placement::default(),
         });
         true_heads.push(head_truth);
     }

@@ -201,6 +201,7 @@ pub fn simulate(
             keypoints: Some(KeypointTrack { timestamps_ns: timestamps.clone(), frames }),
             video: None,
             context_features: None,
+            placement: egoexo_session::placement::Placement::default(),
         });
         occlusion.push(ObserverOcclusion { observer_id: id, occluded: masks });
         reports.push(report);

@@ -49,6 +49,7 @@ use crate::floor::{Floor, floor_from_points};
 use crate::json::JsonCtx;
 use crate::keypoints::read_keypoints;
 use crate::model::{Observer, Session, SubjectInfo, Trajectory, VideoRef, Wearer, WristSource};
+use crate::placement::Placement;
 use crate::vfs::FileTree;
 
 /// File name of an MPS closed-loop trajectory.
@@ -577,6 +578,7 @@ impl<'w> DeviceLoader<'w> {
                 video
             }),
             context_features: None,
+            placement: Placement::default(),
         })
     }
 

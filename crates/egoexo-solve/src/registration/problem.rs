@@ -328,7 +328,6 @@ impl LeastSquaresProblem for Problem<'_> {
         normal
     }
 
-
     fn retract(&self, state: &Vec<NodeState>, step: &DVector<f64>) -> Vec<NodeState> {
         let mut next = state.clone();
         for (n, node) in next.iter_mut().enumerate() {

@@ -19,6 +19,7 @@ pub const LAYERS: &[(&str, &[&str])] = &[
     ("egoexo-synth", &["egoexo-core", "egoexo-session"]),
     ("egoexo-share", &["egoexo-core", "egoexo-motion-io", "egoexo-protocol", "egoexo-session"]),
     ("egoexo-detect", &["egoexo-core", "egoexo-session", "egoexo-infer", "egoexo-video"]),
+    ("egoexo-register", &["egoexo-core", "egoexo-session", "egoexo-infer", "egoexo-solve"]),
     (
         "egoexo-dataset",
         &[

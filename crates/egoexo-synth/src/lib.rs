@@ -29,6 +29,7 @@ pub mod rng;
 pub mod scene;
 pub mod simulate;
 pub mod video;
+pub mod worlds;
 
 pub use config::SynthConfig;
 pub use simulate::{ObserverReport, SimulatedSession, SynthError, simulate};

@@ -46,6 +46,20 @@ pub fn walking_line(start: Vec3, velocity: Vec3, head_height: f32, seconds: f32)
     })
 }
 
+/// `seconds` of wandering a Lissajous figure (3 m × 2 m, periods about 21 s and 13 s): speed
+/// and curvature keep changing, so no shift in time looks like a move in space — unlike a
+/// circle or a line walked at constant speed, where a clock offset and a rotation (or a
+/// translation) of the world cannot be told apart. Head 1.6 m above the soles.
+pub fn wandering(seconds: f32) -> SmplMotion {
+    let frames = (seconds * FPS) as usize;
+    let (wx, wz) = (0.3f32, 0.48f32);
+    walking(1.6, frames, |t| {
+        let position = Vec3::new(3.0 * (wx * t).sin(), 0.0, 2.0 * (wz * t + 0.7).sin());
+        let velocity = Vec3::new(3.0 * wx * (wx * t).cos(), 0.0, 2.0 * wz * (wz * t + 0.7).cos());
+        (position, velocity.x.atan2(velocity.z))
+    })
+}
+
 /// A walking gait along `path(t) → (floor position, facing yaw about +Y)`.
 fn walking(head_height: f32, frames: usize, path: impl Fn(f32) -> (Vec3, f32)) -> SmplMotion {
     let skeleton = SmplSkeleton::mean_shape().scaled_to_head_height(head_height).expect("procedural motion is valid");

@@ -168,8 +168,9 @@ impl<'a> Problem<'a> {
                 let mut fit = FrameFit { cost: 0.0, errors: Vec::new(), residuals: Vec::new() };
                 for o in &person.observations {
                     let k = if mirrored { COCO17_MIRROR[o.k] } else { o.k };
-                    let point = points.as_ref().and_then(|p| p[k]);
-                    match point.and_then(|p| self.residual(state, e, f, o, &p, with_jacobian)) {
+                    // A keypoint the body has no point for (a face-only body) says nothing.
+                    let Some(point) = points.as_ref().and_then(|p| p[k]) else { continue };
+                    match self.residual(state, e, f, o, &point, with_jacobian) {
                         Some((res, sigma, angle)) => {
                             let s = (res.r[0] * res.r[0] + res.r[1] * res.r[1]) / (sigma * sigma);
                             fit.cost += self.loss.cost(s);
@@ -354,6 +355,9 @@ impl LeastSquaresProblem for Problem<'_> {
 pub(crate) struct FitStatistics {
     /// Frames (of the edge) whose median whitened keypoint error is under the threshold.
     pub inlier_frames: Vec<usize>,
+    /// Frames with any keypoint the body has a point for (the others say nothing either way:
+    /// a face-only body seen from behind).
+    pub usable_frames: usize,
     /// Median angle (radians) over the inlier frames' keypoints.
     pub median_angle_rad: f64,
 }
@@ -364,11 +368,13 @@ impl Problem<'_> {
     pub fn statistics(&self, state: &[NodeState], e: usize, threshold: f64) -> FitStatistics {
         let mut inliers = Vec::new();
         let mut angles = Vec::new();
+        let mut usable_frames = 0;
         for f in 0..self.edges[e].view.frames.len() {
             let fit = self.fit_frame(state, e, f, false);
             if fit.errors.is_empty() {
                 continue;
             }
+            usable_frames += 1;
             let mut whitened: Vec<f64> = fit.errors.iter().map(|(w, _)| *w).collect();
             whitened.sort_by(f64::total_cmp);
             if whitened[whitened.len() / 2] < threshold {
@@ -380,6 +386,7 @@ impl Problem<'_> {
         FitStatistics {
             median_angle_rad: angles.get(angles.len() / 2).copied().unwrap_or(f64::NAN),
             inlier_frames: inliers,
+            usable_frames,
         }
     }
 }

@@ -55,7 +55,7 @@ pub struct PointSigmas {
 
 impl Default for PointSigmas {
     fn default() -> Self {
-        Self { face_m: 0.025, torso_m: 0.08, middle_m: 0.12, extremity_m: 0.16 }
+        Self { face_m: 0.025, torso_m: 0.16, middle_m: 0.24, extremity_m: 0.32 }
     }
 }
 

@@ -63,6 +63,7 @@ pub const LAYERS: &[(&str, &[&str])] = &[
             "egoexo-web-worker",
             "egoexo-detect",
             "egoexo-video",
+            "egoexo-register",
         ],
     ),
 ];

@@ -44,6 +44,9 @@ enum Command {
     /// Reconstruct the wearer's motion and write it as AMASS npz, BVH, glb, CSV or JSON
     /// (observers with video and no keypoints get the detector step first).
     Reconstruct(commands::reconstruct::Args),
+    /// Check or register every observer's world against the wearer's (a capture's participants
+    /// into one world) from what their cameras see; `--json` prints the transforms.
+    Register(commands::register::Args),
     /// Serve the page and the share API (share links), storing shares on disk or in S3.
     Serve(commands::serve::Args),
     /// Share a session's reconstruction by link (end-to-end encrypted), or `share get` one.
@@ -65,6 +68,7 @@ fn main() -> std::process::ExitCode {
         Command::Keypoints(args) => commands::keypoints::run(args),
         Command::DetectorEval(args) => commands::detector_eval::run(args),
         Command::Reconstruct(args) => commands::reconstruct::run(args),
+        Command::Register(args) => commands::register::run(args),
         Command::Serve(args) => commands::serve::run(args),
         Command::Share(args) => commands::share::run(args),
         Command::Live(args) => commands::live::run(args),

@@ -19,6 +19,9 @@ pub enum TimedStage {
     Import,
     /// Resampling every stream onto the reconstruction timeline (callers).
     Align,
+    /// Checking and registering the observers' worlds against the wearer (callers:
+    /// `egoexo-register`, with its coarse body).
+    Register,
     /// The wearer's ego features of a window (`inputs::ego_window`).
     EgoFeatures,
     /// EgoNet's coarse pose of a window.
@@ -40,9 +43,10 @@ pub enum TimedStage {
 
 impl TimedStage {
     /// Every stage, in pipeline order.
-    pub const ALL: [TimedStage; 10] = [
+    pub const ALL: [TimedStage; 11] = [
         TimedStage::Import,
         TimedStage::Align,
+        TimedStage::Register,
         TimedStage::EgoFeatures,
         TimedStage::EgoNet,
         TimedStage::ExoFeatures,
@@ -58,6 +62,7 @@ impl TimedStage {
         match self {
             TimedStage::Import => "import",
             TimedStage::Align => "align",
+            TimedStage::Register => "register",
             TimedStage::EgoFeatures => "ego-features",
             TimedStage::EgoNet => "egonet",
             TimedStage::ExoFeatures => "exo-features",

@@ -8,7 +8,8 @@
 //! importers and the engine:
 //!
 //! 1. builds what the wearer looks like from outside over time — the face from the head
-//!    trajectory, the body from EgoNet's coarse pose on the windows the observers see
+//!    trajectory, and, for an observer the face alone does not settle (one that sees the
+//!    wearer's back), the body from EgoNet's coarse pose on the windows the observers see
 //!    ([`Engine::coarse_body`]) — and what each observer's camera saw (its keypoints at its
 //!    camera poses, in its own world);
 //! 2. per [`RegisterMode`]: checks a world given as shared against its views
@@ -33,7 +34,7 @@ use egoexo_session::align::{AlignError, AlignOptions, align};
 use egoexo_session::model::{ContextFeatureTrack, Observer, Session, Trajectory, VideoRef};
 use egoexo_session::placement::{ClockRef, Placement, RegistrationRecord, WorldRef, describe_registration};
 use egoexo_solve::registration::{
-    Dof, RegisterOptions, Registration, RegistrationError, RegistrationStatus, check_agreement, register,
+    Dof, RegisterOptions, Registration, RegistrationError, RegistrationStatus, TargetTrack, check_agreement, register,
 };
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -132,7 +133,8 @@ pub struct ObserverReport {
 pub struct SessionRegistration {
     pub mode: RegisterMode,
     pub observers: Vec<ObserverReport>,
-    /// Windows EgoNet ran on for the coarse body (0 without models: face points only).
+    /// Windows EgoNet ran on for the coarse body (0 when the face points settled every
+    /// observer, or without models).
     pub coarse_windows: usize,
 }
 
@@ -177,27 +179,37 @@ pub fn register_session(
             has_views && settings.mode != RegisterMode::Off && !already_settled(observer, settings.mode)
         })
         .collect();
-    let track = if todo.is_empty() {
+    // The face from the head trajectory first (free, and exact up to the face); EgoNet's body
+    // only for an observer the face alone cannot settle (one that sees the wearer's back).
+    let prepared = if todo.is_empty() {
         None
     } else {
         let aligned = align(session, &AlignOptions::default())?;
-        let wanted = tracks::frames_seen(session, &aligned.timeline, &todo, settings.own_clock_search_s);
-        let coarse = match engine {
-            Some(engine) => Some(engine.coarse_body(&aligned, tracking, settings.coarse_windows, &|f| wanted[f])?),
-            None => None,
-        };
-        report.coarse_windows = coarse.as_ref().map_or(0, |c| c.windows);
-        Some(
-            target_track(&aligned, coarse.as_ref(), origin_ns(session))
-                .map_err(|source| RegisterError::Solve { observer: "(wearer)".into(), source })?,
-        )
+        let face = target_track(&aligned, None, origin_ns(session))
+            .map_err(|source| RegisterError::Solve { observer: "(wearer)".into(), source })?;
+        Some((aligned, face))
     };
+    let mut body: Option<TargetTrack> = None;
     for o in 0..session.observers.len() {
         let observer = &session.observers[o];
         let id = observer.id.clone();
-        let Some(track) = track.as_ref().filter(|_| todo.contains(&o)) else {
+        let Some((aligned, face)) = prepared.as_ref().filter(|_| todo.contains(&o)) else {
             report.observers.push(untouched(observer, settings.mode));
             continue;
+        };
+        let solve_error = |source| RegisterError::Solve { observer: id.clone(), source };
+        let mut body_track = |report: &mut SessionRegistration| -> Result<Option<TargetTrack>, RegisterError> {
+            let Some(engine) = engine else { return Ok(None) };
+            if body.is_none() {
+                let wanted = tracks::frames_seen(session, &aligned.timeline, &todo, settings.own_clock_search_s);
+                let coarse = engine.coarse_body(aligned, tracking, settings.coarse_windows, &|f| wanted[f])?;
+                report.coarse_windows = coarse.windows;
+                body = Some(
+                    target_track(aligned, Some(&coarse), origin_ns(session))
+                        .map_err(|source| RegisterError::Solve { observer: "(wearer)".into(), source })?,
+                );
+            }
+            Ok(body.clone())
         };
         let placement = &observer.placement;
         let view = observer_view(session, o, origin_ns(session));
@@ -210,8 +222,14 @@ pub fn register_session(
             placement.world == WorldRef::Shared && placement.clock == ClockRef::Shared && !view.estimate_focal;
         let mut why = "its world is its own";
         if settings.mode == RegisterMode::Auto && given_shared {
-            let agreement = check_agreement(track, &view, &RigidTransform::IDENTITY, &options)
-                .map_err(|source| RegisterError::Solve { observer: id.clone(), source })?;
+            let mut agreement =
+                check_agreement(face, &view, &RigidTransform::IDENTITY, &options).map_err(solve_error)?;
+            if !agreement.agrees
+                && !agreement.undetermined
+                && let Some(body) = body_track(&mut report)?
+            {
+                agreement = check_agreement(&body, &view, &RigidTransform::IDENTITY, &options).map_err(solve_error)?;
+            }
             if agreement.agrees || agreement.undetermined {
                 let reason = if agreement.agrees {
                     format!(
@@ -243,8 +261,12 @@ pub fn register_session(
         } else if settings.mode == RegisterMode::Force {
             why = "registration forced";
         }
-        let result =
-            register(track, &view, &options).map_err(|source| RegisterError::Solve { observer: id.clone(), source })?;
+        let mut result = register(face, &view, &options).map_err(solve_error)?;
+        if result.status != RegistrationStatus::Registered
+            && let Some(body) = body_track(&mut report)?
+        {
+            result = register(&body, &view, &options).map_err(solve_error)?;
+        }
         let observer = &mut session.observers[o];
         let outcome = if result.status == RegistrationStatus::Registered {
             apply_registration(observer, &result)?;

@@ -15,6 +15,8 @@ use egoexo_core::association::AssociationOptions;
 use egoexo_detect::people::{CoarseParticipant, ViewAssociation, associate_views};
 use egoexo_infer::plan::resolve_tracking;
 use egoexo_infer::{Engine, Method, ReconstructOptions, Reconstruction};
+use egoexo_register::capture::register_capture;
+use egoexo_register::{RegisterMode, RegisterSettings};
 use egoexo_session::Session;
 use egoexo_session::align::{AlignOptions, align};
 use egoexo_session::capture::{Capture, ViewPeople};
@@ -22,6 +24,7 @@ use egoexo_session::import::{Imported, SourceKind};
 
 use super::detection::{detect_missing_keypoints, print_reports};
 use super::models::{load_model_set, read_manifest};
+use super::register::{engine_for, print_capture};
 
 /// MPJPE (cm) of a participant's reconstruction against the ground truth on its timeline,
 /// when the capture has one.
@@ -72,10 +75,20 @@ pub fn reconstruct_capture(
     tracking: Option<TrackingMode>,
     ego_only: bool,
     fps: f32,
+    register: RegisterMode,
 ) -> Result<CaptureReconstruction> {
     let mut engines = Engines { models, manifest: read_manifest(models)?, loaded: BTreeMap::new() };
     let align_options = AlignOptions { fps, ..AlignOptions::default() };
     let reconstructed: Vec<usize> = capture.reconstructed().collect();
+
+    // Registration first: association projects every participant into every camera, which
+    // needs one world.
+    if !ego_only && capture.participants.len() > 1 {
+        let engine = engine_for(models, &[TrackingMode::OnePoint, TrackingMode::ThreePoint])?;
+        let settings = RegisterSettings { mode: register, ..RegisterSettings::default() };
+        let report = register_capture(Some(&engine), tracking, &mut capture, 0, &settings)?;
+        print_capture(&report);
+    }
 
     // Association: every participant's EgoNet pose from their own devices.
     let mut association = Vec::new();

@@ -89,11 +89,12 @@ fn inspect_capture(args: &Args, imported: ImportedCapture) -> Result<()> {
     for p in &capture.participants {
         let _ = writeln!(
             out,
-            "  participant {}: {}{}{}",
+            "  participant {}: {}{}{}; world: {}",
             p.id,
             if p.reconstruct { "reconstructed" } else { "observes only" },
             if p.camera.is_some() { ", RGB camera" } else { "" },
             if p.video.is_some() { " with video" } else { "" },
+            p.placement.describe(),
         );
     }
     for v in &capture.views {
@@ -271,6 +272,8 @@ fn summary_text(args: &Args, imported: &Imported, aligned: &AlignedSession, prob
     for o in &s.observers {
         let _ = writeln!(out, "  {:<12} {}", o.id, trajectory_line(&o.head, origin));
         let _ = writeln!(out, "  {:<12} camera {}", "", camera_line(&o.camera));
+        let fused = if o.placement.fusable() { "fused" } else { "NOT fused" };
+        let _ = writeln!(out, "  {:<12} world: {} ({fused})", "", o.placement.describe());
         match &o.keypoints {
             Some(kp) => {
                 let detected: usize = kp.frames.iter().map(|f| f.iter().filter(|k| k.is_some()).count()).sum();
@@ -387,6 +390,8 @@ fn summary_json(imported: &Imported, aligned: &AlignedSession, problems: &[Strin
             "head": stream(&o.head.timestamps_ns),
             "camera": camera_line(&o.camera),
             "keypoints": o.keypoints.as_ref().map(|k| stream(&k.timestamps_ns)),
+            "placement": o.placement,
+            "fused": o.placement.fusable(),
         })).collect::<Vec<_>>(),
         "ground_truth_frames": s.ground_truth.as_ref().map(|g| g.motion.len()),
         "timeline": {"fps": aligned.timeline.fps, "frames": aligned.timeline.frames, "start_ns": aligned.timeline.start_ns},

@@ -12,6 +12,7 @@ pub mod live;
 pub mod mocap;
 pub mod models;
 pub mod reconstruct;
+pub mod register;
 pub mod serve;
 pub mod session_input;
 pub mod share;

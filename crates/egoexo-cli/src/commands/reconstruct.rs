@@ -10,6 +10,7 @@ use egoexo_infer::job::WINDOW_CHUNK;
 use egoexo_infer::plan::resolve_tracking;
 use egoexo_infer::{Engine, Method, Progress, ReconstructOptions, Stage, StageTimer, StageTimings, TimedStage};
 use egoexo_motion_io::{Format, write};
+use egoexo_register::{Outcome, RegisterSettings, register_session};
 use egoexo_session::align::{AlignOptions, align};
 use egoexo_session::import::ImportedCapture;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -17,6 +18,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use super::capture::{mpjpe_cm, participant_output, print_association, reconstruct_capture};
 use super::detection::{detect_missing_keypoints, print_reports};
 use super::models::{load_model_set, models_dir, read_manifest};
+use super::register::{RegisterArg, print_session};
 use super::session_input::SessionInput;
 use super::tracking::TrackingArg;
 
@@ -42,6 +44,11 @@ pub struct Args {
     /// Output frame rate.
     #[arg(long, default_value_t = 30.0)]
     pub fps: f32,
+    /// Observers' worlds: `auto` keeps worlds given as shared whose views agree and registers
+    /// the others (docs/registration.md), `off` keeps every world as given (observers in a
+    /// world of their own are left out), `force` registers every observer.
+    #[arg(long, value_enum, default_value_t = RegisterArg::Auto)]
+    pub register: RegisterArg,
     /// Replace an existing output file.
     #[arg(long)]
     pub force: bool,
@@ -67,7 +74,7 @@ pub fn run(args: Args) -> Result<()> {
 
     let started = Instant::now();
     let mut clock = move || started.elapsed().as_secs_f64() * 1e3;
-    let (imported, aligned, setup) = import_and_align(&args, &mut clock)?;
+    let (mut imported, mut aligned, mut setup) = import_and_align(&args, &mut clock)?;
     for warning in &imported.warnings {
         eprintln!("warning: {warning}");
     }
@@ -82,6 +89,19 @@ pub fn run(args: Args) -> Result<()> {
     let set = load_model_set(&dir, &manifest, tracking)?
         .with_context(|| format!("{} has no {}-point models", dir.display(), tracking.points()))?;
     let engine = Engine::new().with_models(set);
+    if !args.ego_only && !imported.session.observers.is_empty() {
+        let settings = RegisterSettings { mode: args.register.into(), ..RegisterSettings::default() };
+        let mut timer = StageTimer::new(&mut clock);
+        let report = timer.time(TimedStage::Register, || {
+            register_session(Some(&engine), tracking, &mut imported.session, &settings)
+        })?;
+        print_session(&report);
+        if report.observers.iter().any(|o| o.outcome == Outcome::Registered) {
+            let options = AlignOptions { fps: args.fps, ..AlignOptions::default() };
+            aligned = timer.time(TimedStage::Align, || align(&imported.session, &options))?;
+        }
+        setup.merge(&timer.timings);
+    }
     let method = if args.ego_only || aligned.observers.is_empty() { Method::EgoOnly } else { Method::EgoExo };
 
     let bar = ProgressBar::new(0).with_style(
@@ -164,6 +184,7 @@ fn run_capture(args: &Args, imported: ImportedCapture, format: Option<Format>) -
         args.tracking.map(TrackingMode::from),
         args.ego_only,
         args.fps,
+        args.register.into(),
     )?;
     print_association(&done.association);
     for (p, output) in done.participants.iter().zip(&outputs) {

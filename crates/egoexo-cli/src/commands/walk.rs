@@ -8,8 +8,9 @@ use anyhow::{Context, Result, bail};
 use egoexo_core::TrackingMode;
 use egoexo_session::format::{save_capture, save_egoexo_with};
 use egoexo_synth::group::{GroupConfig, group_walk, simulate_group};
-use egoexo_synth::procedural::walking_circle;
+use egoexo_synth::procedural::{walking_circle, wandering};
 use egoexo_synth::video::{Appearance, render_observer_videos};
+use egoexo_synth::worlds::{WorldPerturbation, WorldTruth, perturb_capture_worlds, perturb_observer_worlds};
 use egoexo_synth::{SynthConfig, simulate};
 
 use super::tracking::TrackingArg;
@@ -55,6 +56,54 @@ pub struct Args {
     /// step. The value is the cameras' image size, pixels (square; ≤ 1408).
     #[arg(long, value_name = "PX")]
     pub video: Option<u32>,
+    /// Move every observer (every participant but the first) into a world of its own — any
+    /// yaw, up to 10 m away, ±0.3 m of floor (`egoexo_synth::worlds`) — as two Aria glasses
+    /// processed by MPS one by one would be; the truth goes to `<out>.worlds.json`.
+    #[arg(long)]
+    pub perturb_worlds: bool,
+    /// With `--perturb-worlds`: put each on a clock of its own too, up to this many seconds
+    /// off (at most 2).
+    #[arg(long, value_name = "S", requires = "perturb_worlds")]
+    pub perturb_clocks: Option<f32>,
+    /// Wander a Lissajous figure instead of the circle: speed and curvature keep changing, so
+    /// a clock offset cannot pass for a turn of the world (`--perturb-clocks` needs it).
+    #[arg(long)]
+    pub wander: bool,
+}
+
+/// The perturbation `--perturb-worlds` / `--perturb-clocks` ask for.
+fn perturbation(args: &Args) -> Result<Option<WorldPerturbation>> {
+    if !args.perturb_worlds {
+        return Ok(None);
+    }
+    let clock = args.perturb_clocks.unwrap_or(0.0);
+    if !(0.0..=2.0).contains(&clock) {
+        bail!("--perturb-clocks {clock}: expected 0 to 2 s");
+    }
+    Ok(Some(WorldPerturbation { max_clock_offset_s: clock, ..WorldPerturbation::default() }))
+}
+
+/// Writes the moved worlds' truth beside the output: `<out>.worlds.json`, one entry per
+/// observer: `{"id", "yaw_deg", "translation_m", "clock_offset_s"}` (`p_session = R_y(yaw) ·
+/// p_observer + translation`, `t_session = t_observer + clock_offset_s`).
+fn write_truth(out: &std::path::Path, truth: &[WorldTruth]) -> Result<PathBuf> {
+    let entries: Vec<serde_json::Value> = truth
+        .iter()
+        .map(|t| {
+            serde_json::json!({
+                "id": t.id,
+                "yaw_deg": t.yaw_deg(),
+                "translation_m": t.t_session_world.translation.to_array(),
+                "clock_offset_s": t.clock_offset_s,
+            })
+        })
+        .collect();
+    let mut name = out.as_os_str().to_owned();
+    name.push(".worlds.json");
+    let path = PathBuf::from(name);
+    std::fs::write(&path, serde_json::to_vec_pretty(&serde_json::json!({"observers": entries}))?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(path)
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -78,7 +127,7 @@ pub fn run(args: Args) -> Result<()> {
         config.camera.image_sizes = vec![px];
     }
     let name = format!("walk-{}s", args.seconds);
-    let motion = walking_circle(args.seconds);
+    let motion = if args.wander { wandering(args.seconds) } else { walking_circle(args.seconds) };
     let mut sim = simulate(&motion, &name, &config, args.seed)?;
     let videos = if args.video.is_some() {
         render_observer_videos(&mut sim, &motion, &Appearance::default(), |frames, w, h, fps| {
@@ -87,8 +136,17 @@ pub fn run(args: Args) -> Result<()> {
     } else {
         Default::default()
     };
+    let perturbation = perturbation(&args)?;
+    let truth = perturbation.map(|p| perturb_observer_worlds(&mut sim.session, &p, args.seed));
     save_egoexo_with(&sim.session, videos, &args.out, args.folder)
         .with_context(|| format!("writing {}", args.out.display()))?;
+    if let Some(truth) = &truth {
+        println!(
+            "moved {} observers into worlds of their own; the truth is in {}",
+            truth.len(),
+            write_truth(&args.out, truth)?.display()
+        );
+    }
     let bytes = std::fs::metadata(&args.out).map(|m| m.len()).unwrap_or(0);
     println!(
         "wrote {} ({:.0} s of walking, {} observers{})",
@@ -118,9 +176,17 @@ fn write_group(args: &Args) -> Result<()> {
     };
     let name = format!("group-{}x{}s", args.participants, args.seconds);
     let sim = simulate_group(&group_walk(usize::from(args.participants), args.seconds), &name, &config, args.seed)?;
-    let capture = if args.identities { sim.with_true_identities() } else { sim.capture };
+    let mut capture = if args.identities { sim.with_true_identities() } else { sim.capture };
+    let truth = perturbation(args)?.map(|p| perturb_capture_worlds(&mut capture, &p, args.seed));
     save_capture(&capture, Default::default(), &args.out, args.folder)
         .with_context(|| format!("writing {}", args.out.display()))?;
+    if let Some(truth) = &truth {
+        println!(
+            "moved {} participants into worlds of their own; the truth is in {}",
+            truth.len(),
+            write_truth(&args.out, truth)?.display()
+        );
+    }
     let bytes = std::fs::metadata(&args.out).map(|m| m.len()).unwrap_or(0);
     println!(
         "wrote {} ({:.0} s, {} participants walking together, {} bystanders{})",

@@ -30,6 +30,7 @@ pub const LAYERS: &[(&str, &[&str])] = &[
             "egoexo-synth",
             "egoexo-infer",
             "egoexo-detect",
+            "egoexo-register",
         ],
     ),
     (

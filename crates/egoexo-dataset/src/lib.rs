@@ -11,6 +11,7 @@
 
 pub mod eval;
 pub mod group;
+pub mod registration;
 pub mod shards;
 
 use thiserror::Error;

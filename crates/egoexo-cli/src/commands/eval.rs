@@ -7,6 +7,9 @@ use egoexo_core::TrackingMode;
 use egoexo_dataset::eval::{
     EvalOptions, LIVE_LOOKAHEADS, evaluate, evaluate_live, format_live_table, format_table, nearest_neighbour_index,
 };
+use egoexo_dataset::registration::{
+    DetectorCondition, RegistrationEvalOptions, VISIBILITY_S, evaluate_registration, format_registration_table,
+};
 use egoexo_dataset::shards::WristKind;
 use egoexo_infer::{Engine, Method};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -41,6 +44,25 @@ pub struct Args {
     /// Lookaheads of the live table, frames.
     #[arg(long, value_delimiter = ',', default_values_t = LIVE_LOOKAHEADS)]
     pub lookaheads: Vec<usize>,
+    /// The registration tables instead (docs/registration.md; needs --models): every
+    /// observer moved into a world of its own, registered with only its first `--visibility`
+    /// seconds of views under each `--detector` condition, against the truth; and the MPJPE of
+    /// ego-exo with the true, the registered and the moved worlds.
+    #[arg(long)]
+    pub perturb_worlds: bool,
+    /// Seconds of mutual visibility of the registration table.
+    #[arg(long, value_delimiter = ',', default_values_t = VISIBILITY_S, requires = "perturb_worlds")]
+    pub visibility: Vec<f64>,
+    /// Detector conditions of the registration table: clean, simulator, harsh.
+    #[arg(long, value_delimiter = ',', value_parser = parse_condition, default_value = "clean,simulator,harsh", requires = "perturb_worlds")]
+    pub detector: Vec<DetectorCondition>,
+}
+
+fn parse_condition(s: &str) -> Result<DetectorCondition, String> {
+    DetectorCondition::ALL
+        .into_iter()
+        .find(|c| c.name() == s)
+        .ok_or_else(|| format!("`{s}`: expected clean, simulator or harsh"))
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -56,6 +78,9 @@ pub fn run(args: Args) -> Result<()> {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     };
+    if args.perturb_worlds {
+        return run_registration(&args, &library, &mut progress, &bar);
+    }
     if args.live {
         let Some(dir) = &args.models else {
             bail!("--live compares the networks' live and offline results: pass --models DIR");
@@ -108,6 +133,43 @@ pub fn run(args: Args) -> Result<()> {
         if args.models.is_none() {
             println!("\n(baselines only: pass --models DIR for the networks' rows)");
         }
+    }
+    Ok(())
+}
+
+/// `--perturb-worlds`: the registration tables.
+fn run_registration(
+    args: &Args,
+    library: &egoexo_mocap::MotionLibrary,
+    progress: &mut dyn FnMut(usize, usize),
+    bar: &ProgressBar,
+) -> Result<()> {
+    let sim = &args.simulation;
+    let Some(dir) = &args.models else {
+        bail!("--perturb-worlds registers with the coarse body and reconstructs: pass --models DIR");
+    };
+    let tracking = sim.tracking_mode();
+    let manifest = read_manifest(dir)?;
+    let set = load_model_set(dir, &manifest, tracking)?
+        .with_context(|| format!("{} has no {}-point models", dir.display(), tracking.points()))?;
+    let engine = Engine::new().with_models(set);
+    let options = RegistrationEvalOptions {
+        subjects: sim.subjects.clone(),
+        observers: sim.observers.max(1),
+        tracking,
+        seed: sim.seed,
+        visibility_s: args.visibility.clone(),
+        conditions: args.detector.clone(),
+        mpjpe: true,
+    };
+    let started = std::time::Instant::now();
+    let mut clock = move || started.elapsed().as_secs_f64() * 1e3;
+    let report = evaluate_registration(library, &engine, &options, &mut clock, progress)?;
+    bar.finish_and_clear();
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print!("{}", format_registration_table(&report));
     }
     Ok(())
 }

@@ -89,19 +89,7 @@ pub fn run(args: Args) -> Result<()> {
     let set = load_model_set(&dir, &manifest, tracking)?
         .with_context(|| format!("{} has no {}-point models", dir.display(), tracking.points()))?;
     let engine = Engine::new().with_models(set);
-    if !args.ego_only && !imported.session.observers.is_empty() {
-        let settings = RegisterSettings { mode: args.register.into(), ..RegisterSettings::default() };
-        let mut timer = StageTimer::new(&mut clock);
-        let report = timer.time(TimedStage::Register, || {
-            register_session(Some(&engine), tracking, &mut imported.session, &settings)
-        })?;
-        print_session(&report);
-        if report.observers.iter().any(|o| o.outcome == Outcome::Registered) {
-            let options = AlignOptions { fps: args.fps, ..AlignOptions::default() };
-            aligned = timer.time(TimedStage::Align, || align(&imported.session, &options))?;
-        }
-        setup.merge(&timer.timings);
-    }
+    setup.merge(&register_observers(&args, &engine, tracking, &mut imported, &mut aligned, &mut clock, true)?);
     let method = if args.ego_only || aligned.observers.is_empty() { Method::EgoOnly } else { Method::EgoExo };
 
     let bar = ProgressBar::new(0).with_style(
@@ -228,6 +216,34 @@ fn import_and_align(
     Ok((imported, aligned, timer.timings))
 }
 
+/// The registration step (`--register`) on the imported session, realigned when an observer
+/// moved; its timings. `report`: print what it did.
+fn register_observers(
+    args: &Args,
+    engine: &Engine,
+    tracking: TrackingMode,
+    imported: &mut egoexo_session::import::Imported,
+    aligned: &mut egoexo_core::aligned::AlignedSession,
+    clock: &mut dyn egoexo_infer::Clock,
+    report: bool,
+) -> Result<StageTimings> {
+    let mut timer = StageTimer::new(clock);
+    if args.ego_only || imported.session.observers.is_empty() {
+        return Ok(timer.timings);
+    }
+    let settings = RegisterSettings { mode: args.register.into(), ..RegisterSettings::default() };
+    let registration = timer
+        .time(TimedStage::Register, || register_session(Some(engine), tracking, &mut imported.session, &settings))?;
+    if report {
+        print_session(&registration);
+    }
+    if registration.observers.iter().any(|o| o.outcome == Outcome::Registered) {
+        let options = AlignOptions { fps: args.fps, ..AlignOptions::default() };
+        *aligned = timer.time(TimedStage::Align, || align(&imported.session, &options))?;
+    }
+    Ok(timer.timings)
+}
+
 /// The output file's bytes: the motion in `format`, or the whole reconstruction as JSON.
 fn encode(format: Option<Format>, recon: &egoexo_infer::Reconstruction) -> Result<Vec<u8>> {
     Ok(match format {
@@ -294,7 +310,9 @@ fn print_timings(
     let mut clock = move || started.elapsed().as_secs_f64() * 1e3;
     let mut all = vec![first];
     for _ in 1..runs {
-        let (_, aligned, setup) = import_and_align(args, &mut clock)?;
+        let (mut imported, mut aligned, mut setup) = import_and_align(args, &mut clock)?;
+        let tracking = options.tracking.unwrap_or_else(|| aligned.tracking_mode());
+        setup.merge(&register_observers(args, engine, tracking, &mut imported, &mut aligned, &mut clock, false)?);
         let mut job = engine.start(&aligned, options, &[method])?;
         while job.step_timed(engine, &aligned, &mut clock)?.is_some() {}
         let (recons, mut timings) = job.finish_timed(&aligned, &mut clock)?;

@@ -412,7 +412,8 @@ function showSession(s) {
     ...(s.observers.length === 0 ? [['observers', 'none']] : s.observers.map((o) =>
       [o.id, `${o.camera}, ` + (o.needs_detection
         ? `video ${o.video}: keypoints found by the detector when reconstructing`
-        : `keypoints in ${o.keypoint_frames} frames`)])),
+        : `keypoints in ${o.keypoint_frames} frames`)
+        + (o.world ? `; world: ${o.world}` : '') + (o.fused === false ? ' — not fused' : '')])),
     ['ground truth', s.ground_truth ? 'yes' : 'no'],
   ]);
   $('session-warnings').replaceChildren(...s.warnings.map((w) => {

@@ -45,6 +45,7 @@ pub const LAYERS: &[(&str, &[&str])] = &[
             "egoexo-share",
             "egoexo-video",
             "egoexo-detect",
+            "egoexo-register",
         ],
     ),
     ("egoexo-viewer", &["egoexo-core", "egoexo-scene", "egoexo-protocol", "egoexo-video"]),

@@ -567,6 +567,17 @@ pub struct ObserverSummary {
     /// Whether a reconstruction first finds its keypoints in that video (it has none yet).
     #[serde(default)]
     pub needs_detection: bool,
+    /// Its world against the wearer's, in words: as given, registered (with the transform and
+    /// its 1σ), or why it is not (docs/registration.md).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub world: String,
+    /// Whether its rays are fused (its world is the wearer's, as given or registered).
+    #[serde(default = "fused_by_default")]
+    pub fused: bool,
+}
+
+fn fused_by_default() -> bool {
+    true
 }
 
 /// An imported session, on the models' timeline.

@@ -221,6 +221,7 @@ pub fn register_session(
         let given_shared =
             placement.world == WorldRef::Shared && placement.clock == ClockRef::Shared && !view.estimate_focal;
         let mut why = "its world is its own";
+        let mut fits_given = None;
         if settings.mode == RegisterMode::Auto && given_shared {
             let mut agreement =
                 check_agreement(face, &view, &RigidTransform::IDENTITY, &options).map_err(solve_error)?;
@@ -257,7 +258,12 @@ pub fn register_session(
                 });
                 continue;
             }
-            why = "its given world does not explain its views";
+            if agreement.fits {
+                fits_given = Some(agreement);
+                why = "its given world fits its views only loosely";
+            } else {
+                why = "its given world does not explain its views";
+            }
         } else if settings.mode == RegisterMode::Force {
             why = "registration forced";
         }
@@ -266,6 +272,32 @@ pub fn register_session(
             && let Some(body) = body_track(&mut report)?
         {
             result = register(&body, &view, &options).map_err(solve_error)?;
+        }
+        if result.status != RegistrationStatus::Registered
+            && let Some(agreement) = fits_given
+        {
+            // The views fit the given world; no better one is found: keep it.
+            let reason = format!(
+                "the given world explains {} of {} frames over {:.1} s; registration found nothing surer ({}: {}); kept as given",
+                agreement.inlier_frames, agreement.frames, agreement.view_s, result.status, result.reason
+            );
+            let kept = Registration::as_given(
+                agreement.frames,
+                agreement.inlier_frames,
+                agreement.view_s,
+                agreement.inlier_view_s,
+                agreement.median_residual_deg,
+                reason.clone(),
+            );
+            session.observers[o].placement.registration =
+                Some(RegistrationRecord { result: kept.clone(), applied: false });
+            report.observers.push(ObserverReport {
+                id,
+                outcome: Outcome::Kept,
+                registration: Some(kept),
+                message: reason,
+            });
+            continue;
         }
         let observer = &mut session.observers[o];
         let outcome = if result.status == RegistrationStatus::Registered {

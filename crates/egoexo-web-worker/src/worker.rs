@@ -24,10 +24,13 @@ use egoexo_protocol::worker::{
     self as protocol, Accuracy, ErrorKind, ExportFormat, FloorSummary, JobStage, ModelFileRef, ModelSetSummary,
     ModelsSummary, ObserverSummary, ReconstructionSummary, SessionSummary, WristSummary,
 };
+use egoexo_register::{RegisterSettings, register_session};
 use egoexo_session::align::DEFAULT_FPS;
 use egoexo_session::format::{write_egoexo_zip, write_egoexo_zip_with};
 use egoexo_session::import::{detect_source, import_capture};
-use egoexo_session::{AlignError, AlignOptions, FileTree, ImportError, ImportOptions, Imported, Limits, align};
+use egoexo_session::{
+    AlignError, AlignOptions, FileTree, ImportError, ImportOptions, ImportWarning, Imported, Limits, align,
+};
 use egoexo_share::{ShareContents, ShareError, ShareManifest};
 use thiserror::Error;
 
@@ -77,6 +80,8 @@ pub enum WorkerError {
     Detection(#[from] crate::detection::DetectionError),
     #[error(transparent)]
     Capture(#[from] egoexo_session::capture::CaptureError),
+    #[error("registering the observers: {0}")]
+    Registration(#[from] egoexo_register::RegisterError),
     #[error("the open capture has no participant `{0}`")]
     NoSuchParticipant(String),
     #[error("participant `{0}` is not reconstructed (the capture has them only as an observer)")]
@@ -97,7 +102,7 @@ impl WorkerError {
             WorkerError::Share(_) => ErrorKind::ShareInvalid,
             WorkerError::ShareRecording(_) | WorkerError::SaveSession(_) => ErrorKind::Export,
             WorkerError::Live(_) => ErrorKind::Reconstruct,
-            WorkerError::Take(_) | WorkerError::Capture(_) => ErrorKind::Import,
+            WorkerError::Take(_) | WorkerError::Capture(_) | WorkerError::Registration(_) => ErrorKind::Import,
             WorkerError::NoSuchParticipant(_) | WorkerError::NotReconstructed(_) => ErrorKind::BadRequest,
             WorkerError::Pool(_) | WorkerError::Detection(_) | WorkerError::NoDetectorLoaded => ErrorKind::Reconstruct,
         }
@@ -418,19 +423,39 @@ impl SessionWorker {
 
     fn open_imported_timed(
         &mut self,
-        imported: Imported,
+        mut imported: Imported,
         mut timings: StageTimings,
     ) -> Result<SessionSummary, WorkerError> {
         self.session = None;
         self.results = None;
         self.group = None;
         let fps = self.fps();
+        self.timed(&mut timings, TimedStage::Register, || self.register_observers(&mut imported))?;
         let aligned = self.timed(&mut timings, TimedStage::Align, || align_for(&imported, fps))?;
         let videos = BTreeMap::new();
         let summary = session_summary(&imported, &aligned, &videos);
         self.session =
             Some(OpenSession { imported, aligned, summary: summary.clone(), timings, videos, detection: Vec::new() });
         Ok(summary)
+    }
+
+    /// Registers the observers of `imported` whose worlds are their own or disagree with
+    /// their views (`egoexo_register`, mode `auto`: docs/registration.md), with EgoNet's
+    /// coarse body when models are loaded (the face alone otherwise); what it did becomes the
+    /// session's warnings.
+    fn register_observers(&self, imported: &mut Imported) -> Result<(), WorkerError> {
+        if imported.session.observers.is_empty() {
+            return Ok(());
+        }
+        let engine = self.models.as_ref().map(|m| m.offline());
+        let tracking = imported.session.wearer.tracking_mode();
+        let tracking =
+            if engine.is_some_and(|e| e.models(tracking).is_none()) { TrackingMode::OnePoint } else { tracking };
+        let report = register_session(engine, tracking, &mut imported.session, &RegisterSettings::default())?;
+        for o in report.warnings() {
+            imported.warnings.push(ImportWarning { file: o.id.clone(), message: o.message.clone() });
+        }
+        Ok(())
     }
 
     /// The open session on the models' timeline, if any.
@@ -949,6 +974,8 @@ fn session_summary(
             keypoint_frames: a.keypoints.iter().filter(|f| f.iter().any(Option::is_some)).count(),
             video: o.video.as_ref().map(|v| v.path.clone()),
             needs_detection: o.keypoints.is_none() && o.video.as_ref().is_some_and(|v| videos.contains_key(&v.path)),
+            world: o.placement.describe(),
+            fused: o.placement.fusable(),
         })
         .collect();
     let mut warnings: Vec<String> = imported.warnings.iter().map(ToString::to_string).collect();

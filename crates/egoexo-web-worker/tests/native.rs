@@ -260,7 +260,7 @@ fn with_a_clock_the_summary_says_where_the_time_went_stage_by_stage() {
     let stages: Vec<&str> = summary.timings.iter().map(|t| t.stage.as_str()).collect();
     assert_eq!(
         stages,
-        ["import", "align", "ego-features", "egonet", "exo-features", "gate", "fusion", "decode", "scene"],
+        ["import", "align", "register", "ego-features", "egonet", "exo-features", "gate", "fusion", "decode", "scene"],
         "pipeline order"
     );
     let get = |stage: &str| summary.timings.iter().find(|t| t.stage == stage).unwrap();
@@ -561,4 +561,44 @@ fn a_pool_of_workers_reconstructs_exactly_what_one_worker_does() {
     let expected = single.reconstruction_summary().unwrap();
     assert_eq!(summary.network_runs, expected.network_runs);
     assert_eq!(summary.windows, expected.windows);
+}
+
+#[test]
+fn observers_in_worlds_of_their_own_are_registered_when_the_session_opens() {
+    use egoexo_session::Imported;
+    use egoexo_session::import::SourceKind;
+    use egoexo_synth::procedural::walking_circle;
+    use egoexo_synth::worlds::{WorldPerturbation, perturb_observer_worlds};
+    use egoexo_synth::{SynthConfig, simulate};
+    let config = SynthConfig { observers: 2, tracking: egoexo_core::TrackingMode::OnePoint, ..SynthConfig::default() };
+    let mut session = simulate(&walking_circle(15.0), "own-worlds", &config, 5).unwrap().session;
+    let mut left_out = session.clone();
+    perturb_observer_worlds(&mut session, &WorldPerturbation::default(), 5);
+    let imported = |session| Imported { session, source: SourceKind::Egoexo, warnings: Vec::new() };
+
+    // Registered as the session opens: the summary says so, and the observers bring rays.
+    let mut worker = worker_with_models();
+    let summary = worker.open_imported(imported(session)).unwrap();
+    for o in &summary.observers {
+        assert!(o.fused && o.world.contains("registered (yaw"), "{}: {}", o.id, o.world);
+        assert!(summary.warnings.iter().any(|w| w.starts_with(&format!("{}: its world is its own: registered", o.id))));
+    }
+    let recon = worker.reconstruct(false, &mut |_| true).unwrap();
+    assert!(recon.observer_ray_frames.values().all(|&frames| frames > 300), "{:?}", recon.observer_ray_frames);
+
+    // An observer seeing someone else entirely (another walk's keypoints) is left out, and
+    // the summary says why.
+    let other = simulate(&walking_circle(15.0), "other", &SynthConfig { observers: 1, ..config }, 77).unwrap().session;
+    left_out.observers[0].keypoints = other.observers[0].keypoints.clone();
+    perturb_observer_worlds(&mut left_out, &WorldPerturbation::default(), 6);
+    let summary = worker.open_imported(imported(left_out)).unwrap();
+    let o = &summary.observers[0];
+    assert!(!o.fused && o.world.contains("own world"), "{}", o.world);
+    assert!(
+        summary.warnings.iter().any(|w| w.contains("observer-1") && w.contains("not fused")),
+        "{:?}",
+        summary.warnings
+    );
+    let recon = worker.reconstruct(false, &mut |_| true).unwrap();
+    assert_eq!(recon.observer_ray_frames.get("observer-1").copied().unwrap_or(0), 0);
 }

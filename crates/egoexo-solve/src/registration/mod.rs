@@ -271,7 +271,12 @@ pub struct Agreement {
     pub view_s: f64,
     pub inlier_view_s: f64,
     pub median_residual_deg: Option<f64>,
-    /// The views agree with the given world (enough frames, and enough of them fit).
+    /// Enough of the frames fit the given world (the residual test).
+    pub fits: bool,
+    /// The fit started from the given world stays within its uncertainty of it (or within 1°
+    /// and 5 cm).
+    pub within_uncertainty: bool,
+    /// Both: the views agree with the given world.
     pub agrees: bool,
     /// There were too few seconds of views to tell.
     pub undetermined: bool,
@@ -306,8 +311,9 @@ pub fn check_agreement(
     let inlier_view_s = prepared.seconds(stats.inlier_frames.iter().copied());
     let undetermined = view_s < options.limits.min_view_s;
     let fraction = stats.inlier_frames.len() as f64 / stats.usable_frames.max(1) as f64;
-    let mut agrees = !undetermined && fraction >= options.limits.agree_inlier_fraction;
-    if agrees {
+    let fits = !undetermined && fraction >= options.limits.agree_inlier_fraction;
+    let mut within_uncertainty = false;
+    if fits {
         let report = levenberg_marquardt(&problem, state, &LmOptions { max_iterations: 12, ..LmOptions::default() });
         let fitted = &report.state[1];
         let rotation = fitted.rotation * given_state.rotation.transpose();
@@ -327,7 +333,7 @@ pub fn check_agreement(
             Dof::Four => 18.47,
             Dof::Six => 22.46,
         };
-        agrees = within_floor || chi2.is_none_or(|c| c <= limit);
+        within_uncertainty = within_floor || chi2.is_none_or(|c| c <= limit);
     }
     Ok(Agreement {
         frames,
@@ -335,7 +341,9 @@ pub fn check_agreement(
         view_s,
         inlier_view_s,
         median_residual_deg: stats.median_angle_rad.is_finite().then(|| stats.median_angle_rad.to_degrees()),
-        agrees,
+        fits,
+        within_uncertainty,
+        agrees: fits && within_uncertainty,
         undetermined,
     })
 }

@@ -350,6 +350,11 @@ impl LeastSquaresProblem for Problem<'_> {
     }
 }
 
+/// A frame whose keypoints lie within this angle of the body (median) is explained whatever
+/// the assumed detector noise: detectors on real images (and older simulations) are noisier
+/// on a distant face than the nominal 3 px, and a wrong world is off by far more.
+pub(crate) const INLIER_ANGLE_FLOOR_RAD: f64 = 1.0 * std::f64::consts::PI / 180.0;
+
 /// Per-frame statistics of a state: how many frames of each edge the body explains.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub(crate) struct FitStatistics {
@@ -364,7 +369,8 @@ pub(crate) struct FitStatistics {
 
 impl Problem<'_> {
     /// Which frames of edge `e` the state explains: a frame whose chosen person's median
-    /// whitened error is below `threshold`.
+    /// whitened error is below `threshold`, or whose median angle is below
+    /// [`INLIER_ANGLE_FLOOR_RAD`].
     pub fn statistics(&self, state: &[NodeState], e: usize, threshold: f64) -> FitStatistics {
         let mut inliers = Vec::new();
         let mut angles = Vec::new();
@@ -377,7 +383,9 @@ impl Problem<'_> {
             usable_frames += 1;
             let mut whitened: Vec<f64> = fit.errors.iter().map(|(w, _)| *w).collect();
             whitened.sort_by(f64::total_cmp);
-            if whitened[whitened.len() / 2] < threshold {
+            let mut angle: Vec<f64> = fit.errors.iter().map(|(_, a)| *a).collect();
+            angle.sort_by(f64::total_cmp);
+            if whitened[whitened.len() / 2] < threshold || angle[angle.len() / 2] < INLIER_ANGLE_FLOOR_RAD {
                 inliers.push(f);
                 angles.extend(fit.errors.iter().map(|(_, a)| *a));
             }

@@ -12,6 +12,8 @@
 use egoexo_core::association::AssociationOptions;
 use egoexo_detect::people::{CoarseParticipant, ViewAssociation, associate_views};
 use egoexo_protocol::worker::{AssociationSummary, ParticipantResult, ParticipantSummary};
+use egoexo_register::capture::register_capture;
+use egoexo_register::{Outcome, RegisterSettings};
 use egoexo_scene::{SceneData, SceneParticipant};
 use egoexo_session::capture::{Capture, View, ViewPeople};
 use egoexo_session::format::WriteError;
@@ -179,6 +181,16 @@ impl SessionWorker {
             return Ok(open.summary.clone());
         }
         let videos = tree.map_or(Ok(BTreeMap::new()), |tree| capture_videos(tree, &imported.capture))?;
+        // Every participant into the first one's world before association, which needs one.
+        let mut imported = imported;
+        let mut timings = timings;
+        let engine = self.models.as_ref().map(|m| m.offline());
+        let report = self.timed(&mut timings, TimedStage::Register, || {
+            register_capture(engine, None, &mut imported.capture, 0, &RegisterSettings::default())
+        })?;
+        for p in report.participants.iter().filter(|p| p.outcome != Outcome::Kept) {
+            imported.warnings.push(ImportWarning { file: p.id.clone(), message: p.message.clone() });
+        }
         let group = Group::new(imported, videos);
         let first = group.selected;
         self.group = Some(group);

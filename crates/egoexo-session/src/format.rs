@@ -489,6 +489,44 @@ fn read_session_manifest(
     Ok((session, reader.warnings))
 }
 
+/// File name of a static camera in an observer folder of the multi-device layout.
+pub const STATIC_CAMERA_FILE: &str = "static_camera.json";
+
+/// A static camera's file (`observers/<id>/static_camera.json` in the multi-device layout,
+/// `docs/session-format.md`): its `camera` as in a `.egoexo` observer, and `pose` (its
+/// `T_world_device` in the session's world) or a `placement` with `mount: fixed` and
+/// `world: own` (a camera to register). `file` is relative to `root`. The trajectory holds
+/// the pose once; [`spread_fixed_poses`] spans it over the recording.
+pub fn read_static_camera(
+    root: &FileTree,
+    file: &str,
+) -> Result<(CameraCalibration, Trajectory, Placement, Vec<ImportWarning>), ImportError> {
+    let display = root.display_path(file);
+    let text = root.read_text(file)?;
+    let ctx = JsonCtx::file(&display);
+    let doc = ctx.parse(&text)?;
+    let mut reader = ManifestReader { root, ctx, warnings: Vec::new() };
+    reader.known_keys(&doc, "", &["camera", "pose", "placement"]);
+    if let Some(t) = ctx.optional(&doc, "", "trajectory")? {
+        return Err(ctx.invalid(
+            "trajectory",
+            "`pose` or a `placement` (a static camera); a worn device is an MPS device folder",
+            t,
+        ));
+    }
+    let camera = reader.camera(ctx.field(&doc, "", "camera")?, "camera")?;
+    let (trajectory, placement) = reader.poses_and_placement(&doc, "", "trajectory")?;
+    if placement.mount != Mount::Fixed {
+        return Err(ImportError::invalid(
+            &display,
+            Location::Field("placement.mount".into()),
+            "`fixed` (or no placement with a `pose`): this file is a static camera",
+            "`worn`",
+        ));
+    }
+    Ok((camera, trajectory, placement, reader.warnings))
+}
+
 fn read_capture_manifest(
     root: &FileTree,
     manifest_file: &str,

@@ -119,3 +119,78 @@ fn placements_that_contradict_themselves_are_clear_errors() {
     let e = error_after(|m| m["observers"][1]["placement"] = json!({"world": "elsewhere"}));
     assert!(e.contains("field `observers[1].placement`") && e.contains("unknown variant `elsewhere`"), "{e}");
 }
+
+/// The multi-device Aria folder with observer-2 a static camera (`static_camera.json`
+/// `camera` plus `static`: its pose or `placement`) and observer-1 localised alone.
+fn aria_with_static_camera(static_camera: Value) -> BTreeMap<String, Vec<u8>> {
+    let mut files = aria_fixture();
+    files.retain(|path, _| !path.starts_with("observers/observer-2/slam/"));
+    files.insert("observers/observer-2/static_camera.json".into(), static_camera.to_string().into_bytes());
+    files.insert("observers/observer-1/placement.json".into(), br#"{"world": "own"}"#.to_vec());
+    files
+}
+
+fn pinhole_json() -> Value {
+    json!({"model": "pinhole", "params": [500.0, 500.0, 320.0, 240.0], "width": 640, "height": 480,
+        "t_device_camera": {"translation": [0.0, 0.0, 0.0], "rotation_xyzw": [0.0, 0.0, 0.0, 1.0]}})
+}
+
+#[test]
+fn the_multi_device_folder_takes_static_cameras_and_devices_in_worlds_of_their_own() {
+    use egoexo_session::{ImportOptions, import_session};
+    // A webcam that knows nothing of its pose nor its focal length: registration places it.
+    let unposed = json!({"camera": pinhole_json(),
+        "placement": {"mount": "fixed", "world": "own", "gravity": false, "focal_known": false}});
+    let imported =
+        import_session(&tree("aria_mps", aria_with_static_camera(unposed)), &ImportOptions::default()).unwrap();
+    let session = &imported.session;
+    let head_range = session.wearer.head.time_range_ns().unwrap();
+    let webcam = session.observers.iter().find(|o| o.id == "observer-2").unwrap();
+    assert_eq!(webcam.placement, Placement::fixed_unposed(false));
+    let (start, end) = webcam.head.time_range_ns().unwrap();
+    assert!(start <= head_range.0 && end >= head_range.1, "its one pose spans the recording");
+    assert_eq!(webcam.keypoints.as_ref().unwrap().frames.len(), 61, "its COCO keypoints from the wearer's start");
+    assert!(!webcam.placement.fusable());
+    // The glasses MPS localised alone: their own world, gravity-aligned, not fused as given.
+    let glasses = session.observers.iter().find(|o| o.id == "observer-1").unwrap();
+    assert_eq!(glasses.placement.world, WorldRef::Own);
+    assert!(glasses.placement.gravity && !glasses.placement.fusable());
+
+    // A camera with a pose in the session's world is fused as given.
+    let pose = json!({"translation": [1.0, 1.5, -2.0], "rotation_xyzw": [0.0, 0.0, 0.0, 1.0]});
+    let posed = json!({"camera": pinhole_json(), "pose": pose});
+    let session =
+        import_session(&tree("aria_mps", aria_with_static_camera(posed)), &ImportOptions::default()).unwrap().session;
+    let webcam = session.observers.iter().find(|o| o.id == "observer-2").unwrap();
+    assert_eq!(webcam.placement.mount, Mount::Fixed);
+    assert!(webcam.placement.fusable());
+    assert!(webcam.head.poses.iter().all(|p| p.translation == Vec3::new(1.0, 1.5, -2.0)));
+}
+
+#[test]
+fn static_cameras_and_placements_in_the_folder_layout_have_clear_errors() {
+    use egoexo_session::{ImportOptions, import_session};
+    let error = |files| import_session(&tree("aria_mps", files), &ImportOptions::default()).unwrap_err().to_string();
+    // Neither a pose nor a placement to register it.
+    let e = error(aria_with_static_camera(json!({"camera": pinhole_json()})));
+    assert!(e.contains("observers/observer-2/static_camera.json") && e.contains("`pose` (a static camera)"), "{e}");
+    // A static camera beside MPS output.
+    let mut both = aria_with_static_camera(
+        json!({"camera": pinhole_json(), "pose": {"translation": [0, 1, 0], "rotation_xyzw": [0, 0, 0, 1]}}),
+    );
+    both.insert(
+        "observers/observer-2/slam/closed_loop_trajectory.csv".into(),
+        aria_fixture()["observers/observer-2/slam/closed_loop_trajectory.csv"].clone(),
+    );
+    let e = error(both);
+    assert!(e.contains("static_camera.json") && e.contains("closed_loop_trajectory.csv"), "{e}");
+    // A placement file that says what an MPS folder cannot be, or is not a placement.
+    let mut fixed = aria_fixture();
+    fixed.insert("observers/observer-1/placement.json".into(), br#"{"mount": "fixed"}"#.to_vec());
+    let e = error(fixed);
+    assert!(e.contains("observers/observer-1/placement.json") && e.contains("`worn` for an MPS device folder"), "{e}");
+    let mut bad = aria_fixture();
+    bad.insert("observers/observer-1/placement.json".into(), br#"{"world": "elsewhere"}"#.to_vec());
+    let e = error(bad);
+    assert!(e.contains("observers/observer-1/placement.json") && e.contains("world: shared|own"), "{e}");
+}

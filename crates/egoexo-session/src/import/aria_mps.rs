@@ -21,6 +21,10 @@
 //!   observers/<id>/         one device folder per observer; <id> becomes the observer id
 //!     keypoints.jsonl       the observer's 2D keypoints (JSON lines), or
 //!     keypoints.json        COCO-style keypoint JSON (optional)
+//!     placement.json        its world and clock when not the others' (optional: e.g.
+//!                           `{"world": "own"}` for glasses MPS localised alone)
+//!     static_camera.json    instead of MPS output: a static camera (its calibration and pose,
+//!                           or none to register it; `crate::format::read_static_camera`)
 //!   subject.json            {"height_m": 1.78} and/or {"betas": [...]} (optional)
 //! ```
 //! Either every device folder has a `time_sync.csv` or none does; without them all devices
@@ -46,10 +50,11 @@ use crate::aria::trajectory::{Clock, CsvTrajectory, read_closed_loop_trajectory}
 use crate::aria::{AriaFrameSize, nominal_t_device_cpf, session_pose_from_file, t_session_world_from_gravity};
 use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
 use crate::floor::{Floor, floor_from_points};
+use crate::format::{STATIC_CAMERA_FILE, read_static_camera};
 use crate::json::JsonCtx;
 use crate::keypoints::read_keypoints;
 use crate::model::{Observer, Session, SubjectInfo, Trajectory, VideoRef, Wearer, WristSource};
-use crate::placement::Placement;
+use crate::placement::{Mount, Placement, spread_fixed_poses};
 use crate::vfs::FileTree;
 
 /// File name of an MPS closed-loop trajectory.
@@ -565,6 +570,7 @@ impl<'w> DeviceLoader<'w> {
         })?;
         let start = device.trajectory.timestamps_ns.first().copied().unwrap_or_default();
         let keypoints = read_observer_keypoints(&folder, id, options, start, self.warnings)?;
+        let placement = read_placement_file(&folder)?;
         Ok(Observer {
             id: id.to_owned(),
             head: device.trajectory,
@@ -578,8 +584,43 @@ impl<'w> DeviceLoader<'w> {
                 video
             }),
             context_features: None,
-            placement: Placement::default(),
+            placement,
         })
+    }
+
+    /// The static camera `id` in the observer folder `dir` of `root`
+    /// ([`STATIC_CAMERA_FILE`] and its keypoints, on the session clock; COCO frame numbers
+    /// count from `start_ns`, the wearer's first pose). No MPS output may sit beside it.
+    pub(crate) fn static_camera(
+        &mut self,
+        root: &FileTree,
+        dir: &str,
+        id: &str,
+        start_ns: i64,
+    ) -> Result<Observer, ImportError> {
+        let folder = root.view(dir);
+        let mps = folder.paths().into_iter().find(|p| {
+            let name = p.rsplit('/').next().unwrap_or(p);
+            name == TRAJECTORY_FILE || name == CALIBRATION_FILE
+        });
+        if let Some(found) = mps {
+            return Err(ImportError::invalid(
+                folder.display_path(STATIC_CAMERA_FILE),
+                Location::File,
+                "a static camera's folder without MPS output, or an MPS device folder without a static camera file",
+                format!("both {STATIC_CAMERA_FILE} and {found}"),
+            ));
+        }
+        let (camera, head, placement, warnings) = read_static_camera(&folder, STATIC_CAMERA_FILE)?;
+        self.warnings.extend(warnings);
+        let keypoints = read_observer_keypoints(&folder, id, self.options, start_ns, self.warnings)?;
+        if keypoints.is_none() {
+            self.warnings.push(ImportWarning {
+                file: folder.display_path(""),
+                message: "a static camera without keypoints: it sees nothing the reconstruction can use".into(),
+            });
+        }
+        Ok(Observer { id: id.to_owned(), head, camera, keypoints, video: None, context_features: None, placement })
     }
 
     /// Errors unless every device was synced or none was; returns whether they were.
@@ -645,7 +686,12 @@ pub fn import_multi_device(
                 format!("`{id}`"),
             ));
         }
-        observers.push(devices.observer(root, &dir, &id, options)?);
+        if root.view(&dir).contains(STATIC_CAMERA_FILE) {
+            let start_ns = wearer.head.timestamps_ns.first().copied().unwrap_or_default();
+            observers.push(devices.static_camera(root, &dir, &id, start_ns)?);
+        } else {
+            observers.push(devices.observer(root, &dir, &id, options)?);
+        }
     }
     devices.finish()?;
     if observers.is_empty() {
@@ -671,8 +717,39 @@ pub fn import_multi_device(
         });
         SubjectInfo::default()
     };
-    let session = Session { name: name.to_owned(), wearer, observers, subject, ground_truth: None, floor };
+    let mut session = Session { name: name.to_owned(), wearer, observers, subject, ground_truth: None, floor };
+    spread_fixed_poses(&mut session);
     Ok((session, warnings))
+}
+
+/// File name of an observer folder's placement (its world and clock against the wearer's).
+pub const PLACEMENT_FILE: &str = "placement.json";
+
+/// An observer folder's [`PLACEMENT_FILE`] (`{"world": "own"}`, …; the `.egoexo` placement's
+/// fields), or the default placement (the wearer's world and clock) without one.
+pub(crate) fn read_placement_file(folder: &FileTree) -> Result<Placement, ImportError> {
+    if !folder.contains(PLACEMENT_FILE) {
+        return Ok(Placement::default());
+    }
+    let file = folder.display_path(PLACEMENT_FILE);
+    let doc = JsonCtx::file(&file).parse(&folder.read_text(PLACEMENT_FILE)?)?;
+    let placement: Placement = serde_json::from_value(doc.clone()).map_err(|e| {
+        ImportError::invalid(
+            &file,
+            Location::File,
+            format!("a placement {{world: shared|own, gravity, clock: shared|own, focal_known}} ({e})"),
+            doc.to_string().chars().take(120).collect::<String>(),
+        )
+    })?;
+    if placement.mount == Mount::Fixed {
+        return Err(ImportError::invalid(
+            &file,
+            Location::Field("mount".into()),
+            format!("`worn` for an MPS device folder (a static camera has a {STATIC_CAMERA_FILE})"),
+            "`fixed`",
+        ));
+    }
+    Ok(placement)
 }
 
 /// `keypoints.jsonl` or `keypoints.json` in an observer's folder, if any.

@@ -125,6 +125,20 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
     }
   }
 
+  // Where a device's world stands: an observer in a world of its own is registered by the
+  // worker (`observer_worlds` of the newest frame) before it is fused.
+  function worldOf(d) {
+    const own = (live.lastFrame?.observer_worlds ?? []).find((o) => o.observer === d.device);
+    if (!own) return { state: 'shared', text: d.role === 'wearer' ? 'the wearer\'s' : 'shared', title: '' };
+    if (own.state !== 'registered') {
+      return { state: own.state, text: `registering — ${Math.floor(own.views_s)} s of views`, title: own.message };
+    }
+    const sigma = own.sigma_yaw_deg === null ? '' : ` ± ${own.sigma_yaw_deg.toFixed(1)}°`;
+    const cm = own.sigma_translation_m === null ? '' : `, ± ${(own.sigma_translation_m * 100).toFixed(0)} cm`;
+    const jumps = own.jumps > 0 ? `, after ${own.jumps} jump${own.jumps > 1 ? 's' : ''}` : '';
+    return { state: own.state, text: `registered: yaw ${own.yaw_deg.toFixed(1)}°${sigma}${cm}${jumps}`, title: own.message };
+  }
+
   function showDevices(devices) {
     const rows = devices.map((d) => {
       const tr = document.createElement('tr');
@@ -132,13 +146,16 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
       const offset = d.clock_offset_ns === null ? 'measuring…'
         : `${(d.clock_offset_ns / 1e6).toFixed(1)} ± ${(d.clock_uncertainty_ns / 1e6).toFixed(1)} ms`;
       const latency = d.latency_ns === null ? '–' : `${(d.latency_ns / 1e6).toFixed(1)} ms`;
-      const cells = [d.device, d.connected ? d.role : `${d.role} (disconnected)`, rate, offset, latency, String(d.frames)];
+      const world = worldOf(d);
+      const cells = [d.device, d.connected ? d.role : `${d.role} (disconnected)`, rate, offset, latency, String(d.frames), world.text];
       tr.replaceChildren(...cells.map((text) => {
         const td = document.createElement('td');
         td.textContent = text;
         return td;
       }));
+      tr.lastChild.title = world.title;
       tr.dataset.device = d.device;
+      tr.dataset.world = world.state;
       tr.dataset.connected = String(d.connected);
       return tr;
     });
@@ -181,9 +198,13 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
     // A room of several wearers: everyone is drawn; the facts are the first wearer's.
     const wearers = info.wearers ?? [];
     const everyone = wearers.length > 1 ? ` · ${wearers.length} wearers drawn (${wearers.join(', ')}; facts of ${wearers[0]})` : '';
+    // Observers in worlds of their own are left out until registered.
+    const registering = (info.observer_worlds ?? []).filter((o) => o.state !== 'registered');
+    const waiting = registering.length === 0 ? ''
+      : ` · registering ${registering.map((o) => `${o.observer} (${Math.floor(o.views_s)} s of views)`).join(', ')}: not fused yet`;
     $('live-mode').textContent = (!info.tracked ? 'the wearer is not tracked'
       : info.method === 'ego-only' ? 'ego-only: no observer sees the wearer now (none connected, or no keypoints)'
-        : `ego-exo${who}`) + networks + everyone;
+        : `ego-exo${who}`) + waiting + networks + everyone;
     $('live-mode').dataset.wearers = String(Math.max(1, wearers.length));
     $('live-mode').dataset.method = info.method;
     $('live-mode').dataset.trainedForLookahead = String(info.trained_for_lookahead);

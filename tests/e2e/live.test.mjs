@@ -4,7 +4,8 @@
 // wearer's clock jumps), the page draws the wearer moving, lists every device with a
 // plausible rate, shows its latency, says when it reconstructs ego-only, keeps going while a
 // malformed client is thrown out, and after "Stop and keep" the take holds every frame that
-// was sent and reconstructs offline. A second page joins late by the watch link.
+// was sent and reconstructs offline. A second page joins late by the watch link. Observers
+// that stream in worlds of their own (`--own-worlds`) are registered within 10 s, then fused.
 
 import assert from 'node:assert/strict';
 import { execFileSync, spawn } from 'node:child_process';
@@ -173,6 +174,61 @@ describe('live capture', () => {
     assert.deepEqual(watcher.errors, []);
     await watcher.close();
     await app.close();
+  });
+
+  test('observers in worlds of their own are registered while they stream, then fused', async (t) => {
+    const app = await openApp(browser, '?backend=webgl2');
+    try {
+      assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
+      await app.page.getByRole('button', { name: 'Go live' }).click();
+      await app.page.waitForSelector('#live-room[data-code]');
+      const code = await app.page.getAttribute('#live-room', 'data-code');
+      await app.waitState('live');
+      // Both observers stream in random worlds of their own (their hellos say so).
+      const replay = egoexo([
+        'live', 'replay', SAMPLE, '--url', APP_URL, '--room', code, '--duration-s', '18', '--own-worlds', '--seed', '3',
+      ]);
+      // Registering first: listed so, and not fused.
+      const early = await waitFor(app, (l) => (l.lastFrame?.observer_worlds ?? []).length === 2, 'the observers registering');
+      assert.ok(early.lastFrame.observer_worlds.every((o) => o.state === 'registering'), JSON.stringify(early.lastFrame));
+      assert.deepEqual(early.lastFrame.exo_observers, []);
+      const row = app.page.locator('#live-devices tr[data-world="registering"]').first();
+      await row.waitFor();
+      assert.match(await row.innerText(), /registering — \d+ s of views/);
+      // Registered within 10 s of streaming (the take's clock: frame numbers at 30 fps from
+      // its first head pose; polling and the lookahead add a little).
+      const done = await waitFor(app, (l) => {
+        const worlds = l.lastFrame?.observer_worlds ?? [];
+        return worlds.length === 2 && worlds.every((o) => o.state === 'registered');
+      }, 'both observers registered', 60_000);
+      const frame = done.lastFrame;
+      for (const o of frame.observer_worlds) {
+        assert.ok(o.registered_after_s <= 10, `${o.observer} registered after ${o.registered_after_s} s of views`);
+      }
+      assert.ok(frame.frame / 30 <= 12, `registered by frame ${frame.frame}`);
+      // … and then fused: ego-exo with their rays.
+      const fused = await waitFor(app, (l) => l.lastFrame?.method === 'ego-exo' && l.lastFrame.exo_observers.length > 0, 'their rays fused');
+      assert.ok(fused.lastFrame.exo_observers.every((id) => ['observer-1', 'observer-2'].includes(id)));
+      await waitFor(app, (l) => l.devices.length === 3, 'the device list');
+      await app.page.locator('#live-devices tr[data-world="registered"]').first().waitFor();
+      assert.match(await app.text('#live-devices'), /registered: yaw -?\d+\.\d°/);
+      // The registration is the truth the replay drew (yaw, and the translation at the origin).
+      const sent = await replay;
+      assert.equal(sent.worlds.length, 2);
+      const last = (await live(app)).lastFrame.observer_worlds;
+      for (const truth of sent.worlds) {
+        const found = last.find((o) => o.observer === truth.id);
+        const yaw = Math.abs(((found.yaw_deg - truth.yaw_deg + 540) % 360) - 180);
+        assert.ok(yaw < 2, `${truth.id}: yaw ${found.yaw_deg} against ${truth.yaw_deg}`);
+        const off = Math.hypot(...found.translation_m.map((v, i) => v - truth.translation_m[i]));
+        assert.ok(off < 0.3, `${truth.id}: translation ${found.translation_m} against ${truth.translation_m}`);
+        const after = frame.observer_worlds.find((o) => o.observer === truth.id).registered_after_s;
+        t.diagnostic(`${truth.id}: registered after ${after.toFixed(1)} s of views; yaw error ${yaw.toFixed(2)}°, translation error ${(off * 100).toFixed(1)} cm (at the origin)`);
+      }
+      assert.deepEqual(app.errors, []);
+    } finally {
+      await app.close();
+    }
   });
 
   test('a room of two wearers: both are drawn live, and the kept take reconstructs both', async () => {

@@ -360,6 +360,10 @@ describe('the WebXR page on an emulated Quest 3', () => {
     assert.equal(s.role, 'wearer');
     assert.equal(s.connected, true);
     assert.deepEqual(s.rates_hz.map(([stream]) => stream).sort(), ['head', 'left-wrist', 'right-wrist']);
+    // Its XR space is a world of its own, and its hello said so: every channel carries it.
+    const channels = viewer.texts.filter((m) => m.type === 'channels').at(-1).channels.filter((c) => c.device === 'quest');
+    assert.equal(channels.length, 3);
+    assert.ok(channels.every((c) => c.world === 'own'), JSON.stringify(channels));
     // Same machine, same clock: the measured offset is small.
     assert.ok(Math.abs(s.clock_offset_ns) < 1e9, `clock offset ${s.clock_offset_ns} ns`);
   });

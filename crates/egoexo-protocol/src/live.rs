@@ -112,6 +112,36 @@ impl DeviceRole {
     }
 }
 
+/// Whose world a device's poses are in.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DeviceWorld {
+    /// The room's one world, shared with every other device that says `shared` (the default:
+    /// devices calibrated together, e.g. Aria glasses through Multi-SLAM).
+    #[default]
+    Shared,
+    /// A world of its own (a headset's XR reference space, glasses localised alone): Y-up and
+    /// gravity-aligned, in metres, but a yaw and a translation away from everyone else's.
+    /// Viewers register such an observer to the wearer from its views before they fuse it
+    /// (`docs/registration.md`).
+    Own,
+}
+
+impl DeviceWorld {
+    /// `shared` (the default, left out of the JSON).
+    pub fn is_shared(&self) -> bool {
+        *self == DeviceWorld::Shared
+    }
+
+    /// Its name on the wire (`shared`, `own`).
+    pub fn name(self) -> &'static str {
+        match self {
+            DeviceWorld::Shared => "shared",
+            DeviceWorld::Own => "own",
+        }
+    }
+}
+
 /// How a client proves it may be in a room.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(untagged)]
@@ -171,6 +201,10 @@ pub struct DeviceHello {
     /// version 1: a relay that predates it ignores it.)
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target: Option<String>,
+    /// Whether its poses are in the room's shared world or one of its own. (Added within
+    /// version 1: absent means `shared`.)
+    #[serde(default, skip_serializing_if = "DeviceWorld::is_shared")]
+    pub world: DeviceWorld,
 }
 
 /// Client → relay (JSON text frames).
@@ -198,6 +232,9 @@ pub struct ChannelInfo {
     /// The observer's target wearer ([`DeviceHello::target`]), when it names one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target: Option<String>,
+    /// The device's world ([`DeviceHello::world`]).
+    #[serde(default, skip_serializing_if = "DeviceWorld::is_shared")]
+    pub world: DeviceWorld,
 }
 
 /// A device, as the relay sees it.
@@ -733,6 +770,7 @@ mod tests {
                 role: DeviceRole::Wearer,
                 streams: vec![Stream::Head],
                 target: None,
+                world: DeviceWorld::Shared,
             }),
         };
         let json = serde_json::to_value(&hello).unwrap();
@@ -748,6 +786,17 @@ mod tests {
         assert!(matches!(viewer, ClientMessage::Hello { device: None, join: Join::Secret { .. }, .. }));
         assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"publish"}"#).is_err());
         assert!(DeviceRole::Observer.allows(Stream::Keypoints) && !DeviceRole::Wearer.allows(Stream::Keypoints));
+        // A device in a world of its own says so; without the field the world is shared.
+        let own: ClientMessage = serde_json::from_str(
+            r#"{"type":"hello","protocol":1,"join":{"code":"7KQ-M4T"},"device":{"id":"quest","role":"observer","streams":["head","keypoints"],"world":"own"}}"#,
+        )
+        .unwrap();
+        let ClientMessage::Hello { device: Some(device), .. } = own else { panic!("{own:?}") };
+        assert_eq!(device.world, DeviceWorld::Own);
+        assert!(serde_json::to_string(&device).unwrap().contains(r#""world":"own""#));
+        assert!(
+            serde_json::from_str::<DeviceHello>(r#"{"id":"a","role":"wearer","streams":[],"world":"mars"}"#).is_err()
+        );
         assert!(valid_device_id("observer-1") && !valid_device_id("<b>") && !valid_device_id(""));
     }
 }

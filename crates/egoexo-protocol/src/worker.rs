@@ -512,6 +512,35 @@ pub struct LiveFrameInfo {
     /// first (added in version 6; absent for one wearer).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub wearers: Vec<String>,
+    /// Observers in worlds of their own (their hello said `"world": "own"`) and where their
+    /// registration stands (added in version 6; absent when every device shares the room's
+    /// world).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub observer_worlds: Vec<LiveObserverWorld>,
+}
+
+/// A live observer in a world of its own, as the worker's rolling registration sees it
+/// (`docs/registration.md`, "Live").
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LiveObserverWorld {
+    pub observer: String,
+    /// `registering` (not fused: the wearer is reconstructed without it) or `registered`
+    /// (fused).
+    pub state: String,
+    /// Seconds of its views (frames with keypoints) in its current world so far.
+    pub views_s: f64,
+    /// Seconds from its first view to its registration (relay clock).
+    pub registered_after_s: Option<f64>,
+    /// The registration fused: `p_wearer_world = R_y(yaw_deg) · p_observer_world +
+    /// translation_m`, with 1σ.
+    pub yaw_deg: Option<f64>,
+    pub translation_m: Option<[f64; 3]>,
+    pub sigma_yaw_deg: Option<f64>,
+    pub sigma_translation_m: Option<f64>,
+    /// Times its world jumped (a re-centred headset) and it was registered again.
+    pub jumps: u32,
+    /// In words, for the device list.
+    pub message: String,
 }
 
 /// One file a models manifest lists.

@@ -24,6 +24,7 @@
 //! (the anchor's) through whoever sees whom, jointly.
 
 pub mod capture;
+pub mod live;
 mod tracks;
 
 use egoexo_core::camera::{CameraCalibration, Pinhole, Projection};

@@ -12,8 +12,8 @@ use egoexo_core::exo_keypoints::Keypoint2d;
 use egoexo_core::glam::{Quat, Vec2, Vec3};
 use egoexo_core::rigid::RigidTransform;
 use egoexo_protocol::live::{
-    ChannelInfo, ClientMessage, CloseKind, DataFrame, DeviceHello, DeviceRole, DeviceStatus, FramePayload, Join,
-    LIVE_PROTOCOL_VERSION, LIVE_SUBPROTOCOL, MAX_MESSAGE_BYTES, RelayMessage, RoomCreated, Stream,
+    ChannelInfo, ClientMessage, CloseKind, DataFrame, DeviceHello, DeviceRole, DeviceStatus, DeviceWorld, FramePayload,
+    Join, LIVE_PROTOCOL_VERSION, LIVE_SUBPROTOCOL, MAX_MESSAGE_BYTES, RelayMessage, RoomCreated, Stream,
 };
 use egoexo_server::{ApiLimits, LiveLimits, LiveState, Server, ServerOptions};
 use futures::{SinkExt, StreamExt};
@@ -246,7 +246,13 @@ fn device_hello(join: Join, id: &str, role: DeviceRole, streams: &[Stream]) -> C
     ClientMessage::Hello {
         protocol: LIVE_PROTOCOL_VERSION,
         join,
-        device: Some(DeviceHello { id: id.into(), role, streams: streams.to_vec(), target: None }),
+        device: Some(DeviceHello {
+            id: id.into(),
+            role,
+            streams: streams.to_vec(),
+            target: None,
+            world: Default::default(),
+        }),
     }
 }
 
@@ -513,7 +519,13 @@ async fn hostile_clients_are_closed_with_a_reason_and_the_others_carry_on() {
         let hello = ClientMessage::Hello {
             protocol: LIVE_PROTOCOL_VERSION,
             join: device_join(&room),
-            device: Some(DeviceHello { id: id.into(), role, streams: vec![Stream::Head], target: Some(target.into()) }),
+            device: Some(DeviceHello {
+                id: id.into(),
+                role,
+                streams: vec![Stream::Head],
+                target: Some(target.into()),
+                world: Default::default(),
+            }),
         };
         let (c, reason) = Client::connect(relay.addr, hello, 0, true).await.closed().await;
         assert_eq!(c, code(CloseKind::BadHello), "{id}: {reason}");
@@ -647,7 +659,7 @@ async fn a_device_that_reconnects_keeps_its_channels_and_the_old_socket_is_close
     // Once the relay knows the first connection's clock (its frames would otherwise wait).
     tokio::time::sleep(Duration::from_millis(300)).await;
     first.send_frame(Stream::Head, pose(0.1));
-    let mut second = Client::connect(relay.addr, hello, 0, true).await;
+    let mut second = Client::connect(relay.addr, hello.clone(), 0, true).await;
     second.welcome().await;
     let (c, _) = first.closed().await;
     assert_eq!(c, CloseKind::Replaced.code());
@@ -659,6 +671,17 @@ async fn a_device_that_reconnects_keeps_its_channels_and_the_old_socket_is_close
     let lists = heard.iter().filter(|h| matches!(h, Heard::Message(RelayMessage::Channels { .. }))).count();
     assert_eq!(lists, 1, "the list the viewer got on joining, and no other: it did not change");
     assert_eq!(last_channels(&heard).len(), 2);
+    assert!(last_channels(&heard).iter().all(|c| c.world == DeviceWorld::Shared));
+    // Back in a world of its own (a headset told so): the same channels, each saying it.
+    let ClientMessage::Hello { protocol, join, device: Some(mut device) } = hello else { unreachable!() };
+    device.world = DeviceWorld::Own;
+    let own = ClientMessage::Hello { protocol, join, device: Some(device) };
+    let mut third = Client::connect(relay.addr, own, 0, true).await;
+    third.welcome().await;
+    let heard = viewer.listen_until(LOADED, SETTLE, |h| !last_channels(h).is_empty()).await;
+    let channels = last_channels(&heard);
+    assert_eq!(channels.len(), 2);
+    assert!(channels.iter().all(|c| c.world == DeviceWorld::Own), "{channels:?}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -19,10 +19,13 @@ use std::ops::RangeInclusive;
 use egoexo_core::camera::CameraCalibration;
 use egoexo_core::exo_keypoints::{COCO17_COUNT, Keypoint2d};
 use egoexo_core::rigid::RigidTransform;
-use egoexo_protocol::live::{ChannelInfo, DataFrame, DeviceHello, DeviceRole, FramePayload, Stream, valid_device_id};
+use egoexo_protocol::live::{
+    ChannelInfo, DataFrame, DeviceHello, DeviceRole, DeviceWorld, FramePayload, Stream, valid_device_id,
+};
 
 use crate::capture::{Capture, CaptureError, Participant, View, ViewPeople};
 use crate::model::{KeypointTrack, Observer, Session, SubjectInfo, Trajectory, Wearer, WristSource};
+use crate::placement::{Placement, WorldRef};
 use crate::validate::validate_session;
 use crate::{ImportError, ImportWarning};
 
@@ -99,6 +102,7 @@ pub fn capture_devices(capture: &Capture) -> Result<Vec<CaptureDevice>, TakeErro
                 role: DeviceRole::Wearer,
                 streams: poses.iter().map(|(s, _)| *s).collect(),
                 target: None,
+                world: device_world(&p.placement),
             },
             camera: None,
             poses,
@@ -115,6 +119,7 @@ pub fn capture_devices(capture: &Capture) -> Result<Vec<CaptureDevice>, TakeErro
                 role: DeviceRole::Observer,
                 streams: vec![Stream::Head],
                 target: None,
+                world: device_world(&p.placement),
             },
             camera: Some(calibration),
             poses: vec![(Stream::Head, p.head.clone())],
@@ -136,6 +141,7 @@ pub fn capture_devices(capture: &Capture) -> Result<Vec<CaptureDevice>, TakeErro
                 role: DeviceRole::Observer,
                 streams: vec![Stream::Head, Stream::Keypoints],
                 target,
+                world: device_world(&camera.placement),
             },
             camera: Some(calibration),
             poses: vec![(Stream::Head, camera.head.clone())],
@@ -148,12 +154,33 @@ pub fn capture_devices(capture: &Capture) -> Result<Vec<CaptureDevice>, TakeErro
     Ok(devices)
 }
 
+/// The live world of a participant placed by `placement`: a live device is on the relay's
+/// clock and always has a pose stream, so only the world can be its own.
+fn device_world(placement: &Placement) -> DeviceWorld {
+    match placement.world {
+        WorldRef::Shared => DeviceWorld::Shared,
+        WorldRef::Own => DeviceWorld::Own,
+    }
+}
+
+/// An observer's placement in a live session: its world is the wearer's only when both said
+/// they share the room's world; else its own (gravity-aligned, on the relay's clock), to be
+/// registered before it is fused.
+fn live_placement(observer: DeviceWorld, wearer: DeviceWorld) -> Placement {
+    match (observer, wearer) {
+        (DeviceWorld::Shared, DeviceWorld::Shared) => Placement::default(),
+        _ => Placement { world: WorldRef::Own, ..Placement::default() },
+    }
+}
+
 /// One device's streams.
 #[derive(Debug, Default)]
 struct DeviceTake {
     role: Option<DeviceRole>,
     /// An observer's target wearer, when it names one.
     target: Option<String>,
+    /// Its world, as its hello said.
+    world: DeviceWorld,
     poses: BTreeMap<Stream, BTreeMap<i64, Option<RigidTransform>>>,
     keypoints: BTreeMap<i64, Keypoints>,
     camera: Option<CameraCalibration>,
@@ -182,6 +209,7 @@ impl LiveTake {
             let device = self.devices.entry(channel.device.clone()).or_default();
             device.role = Some(channel.role);
             device.target.clone_from(&channel.target);
+            device.world = channel.world;
         }
     }
 
@@ -227,6 +255,11 @@ impl LiveTake {
 
     pub fn stats(&self) -> TakeStats {
         self.stats
+    }
+
+    /// Whether a device of the take said its world is its own.
+    pub fn has_own_worlds(&self) -> bool {
+        self.devices.values().any(|d| d.world == DeviceWorld::Own)
     }
 
     /// The wearers whose head has streamed: the first to stream it (whose head is the take's
@@ -307,6 +340,7 @@ impl LiveTake {
         // A wrist needs two samples to be interpolated at all.
         let wrist = |stream| self.wearer_stream(wearer, stream).map(trajectory).filter(|t| t.len() >= 2);
         let several = self.wearers().len() > 1;
+        let wearer_world = self.devices.get(wearer).map_or(DeviceWorld::Shared, |d| d.world);
         let mut warnings = Vec::new();
         let mut observers = Vec::new();
         for (id, device) in self.devices.iter().filter(|(_, d)| d.role == Some(DeviceRole::Observer)) {
@@ -344,7 +378,7 @@ impl LiveTake {
                 keypoints: (!keypoints.frames.is_empty()).then_some(keypoints),
                 video: None,
                 context_features: None,
-                placement: crate::placement::Placement::default(),
+                placement: live_placement(device.world, wearer_world),
             });
         }
         let session = Session {
@@ -385,7 +419,11 @@ impl LiveTake {
                 }
             }
             let head_joint = session.wearer.head_joint_in_device;
-            participants.push(Participant::wearing(id, &session.wearer, SubjectInfo::default(), None));
+            let mut participant = Participant::wearing(id, &session.wearer, SubjectInfo::default(), None);
+            if self.devices.get(id).is_some_and(|d| d.world == DeviceWorld::Own) {
+                participant.placement = Placement { world: WorldRef::Own, ..Placement::default() };
+            }
+            participants.push(participant);
             for o in session.observers {
                 if let Some(keypoints) = &o.keypoints {
                     views.push(View {
@@ -430,6 +468,7 @@ mod tests {
             role,
             stream,
             target: None,
+            world: Default::default(),
         };
         vec![
             c(0, "wearer", DeviceRole::Wearer, Stream::Head),
@@ -507,6 +546,7 @@ mod tests {
             role,
             stream,
             target: target.map(Into::into),
+            world: Default::default(),
         };
         let mut take = LiveTake::new();
         take.set_channels(&[

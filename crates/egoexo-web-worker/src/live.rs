@@ -17,6 +17,12 @@
 //! reconstructed on the same window from their own devices and the observers that name them
 //! (`LiveTake::to_session_of`) and drawn beside the first (`SceneData::with_others`), each in
 //! their participant colour. The frame's facts are the first wearer's.
+//!
+//! Observers in worlds of their own (`"world": "own"` in their hello) are registered while
+//! they stream ([`RollingRegistration`]): until a registration holds, each window is
+//! reconstructed without them (ego-only when nobody else sees the wearer); once it holds,
+//! their poses are mapped into the wearer's world and fused; a world that jumps is
+//! registered again. Every frame says where each stands ([`LiveFrame::observer_worlds`]).
 
 use std::ops::Range;
 
@@ -24,7 +30,9 @@ use egoexo_core::aligned::Timeline;
 use egoexo_infer::windows::WINDOW;
 use egoexo_infer::{Engine, InferError, Method, ReconstructOptions};
 use egoexo_protocol::live::{DataFrame, RelayMessage};
-use egoexo_protocol::worker::{LiveFrameInfo, LiveTakeSummary};
+use egoexo_protocol::worker::{LiveFrameInfo, LiveObserverWorld, LiveTakeSummary};
+use egoexo_register::RegisterError;
+use egoexo_register::live::{RollingRegistration, RollingSettings, RollingState};
 use egoexo_scene::SceneParticipant;
 use egoexo_session::align::{AlignError, AlignOptions, align_on_timeline};
 use egoexo_session::live::{FrameAdded, LiveTake, TakeError};
@@ -41,6 +49,8 @@ pub enum LiveError {
     Take(#[from] TakeError),
     #[error("the live frame's scene: {0}")]
     Scene(String),
+    #[error("an observer's registration: {0}")]
+    Register(#[from] RegisterError),
 }
 
 /// The most frames a lookahead may be (a window's length minus one).
@@ -75,6 +85,8 @@ pub struct LiveFrame {
     /// A room of several wearers: every wearer drawn, the first one (whose facts these are)
     /// first; empty for one wearer.
     pub wearers: Vec<String>,
+    /// Observers in worlds of their own and where their registration stands.
+    pub observer_worlds: Vec<LiveObserverWorld>,
 }
 
 /// A take and the state of its live reconstruction.
@@ -86,6 +98,9 @@ pub struct LiveReconstructor {
     last_shown: Option<usize>,
     shown: u64,
     skipped: u64,
+    registration: RollingRegistration,
+    /// When the registration was last updated (relay ns).
+    registration_updated_ns: Option<i64>,
 }
 
 impl LiveReconstructor {
@@ -98,6 +113,61 @@ impl LiveReconstructor {
             last_shown: None,
             shown: 0,
             skipped: 0,
+            registration: RollingRegistration::new(RollingSettings::default()),
+            registration_updated_ns: None,
+        }
+    }
+
+    /// The rolling registration of the observers in worlds of their own.
+    pub fn registration(&self) -> &RollingRegistration {
+        &self.registration
+    }
+
+    /// Where every observer in a world of its own stands, for the page.
+    pub fn observer_worlds(&self) -> Vec<LiveObserverWorld> {
+        self.registration
+            .observers()
+            .iter()
+            .map(|(id, o)| {
+                let r = o.registration.as_ref();
+                LiveObserverWorld {
+                    observer: id.clone(),
+                    state: match o.state {
+                        RollingState::Registering => "registering",
+                        RollingState::Registered => "registered",
+                    }
+                    .into(),
+                    views_s: o.views_s,
+                    registered_after_s: o.registered_after_s(),
+                    yaw_deg: r.map(|r| r.yaw_deg),
+                    translation_m: r.map(|r| r.translation_m()),
+                    sigma_yaw_deg: r.and_then(|r| r.sigma_yaw_deg),
+                    sigma_translation_m: r.and_then(|r| r.sigma_translation_m),
+                    jumps: o.jumps,
+                    message: o.message.clone(),
+                }
+            })
+            .collect()
+    }
+
+    /// Updates the registration of observers in worlds of their own from the newest views
+    /// (at most twice per solve interval; a solve runs only when one is due).
+    fn update_registration(&mut self, engine: &Engine, newest_ns: i64, wearers: &[String]) {
+        if !self.take.has_own_worlds() {
+            return;
+        }
+        let settings = self.registration.settings();
+        let step_ns = (settings.interval_s * 0.5e9) as i64;
+        if self.registration_updated_ns.is_some_and(|t| newest_ns - t < step_ns) {
+            return;
+        }
+        self.registration_updated_ns = Some(newest_ns);
+        let range = newest_ns - (settings.window_s * 1e9) as i64..=newest_ns;
+        for wearer in wearers {
+            // A wearer without head poses in the range has nothing to register against.
+            if let Ok((recent, _)) = self.take.to_session_of(wearer, "live", Some(range.clone())) {
+                self.registration.update(Some(engine), &recent, newest_ns);
+            }
         }
     }
 
@@ -177,9 +247,11 @@ impl LiveReconstructor {
         let last_ns = timeline.timestamp_ns(timeline.frames - 1);
         let range = timeline.start_ns - MARGIN_NS..=last_ns + MARGIN_NS;
         let wearers = self.take.wearers();
+        self.update_registration(engine, newest_ns, &wearers);
         let index = frame - start;
         let reconstruct_wearer = |wearer: &str| -> Result<_, LiveError> {
-            let (session, _) = self.take.to_session_of(wearer, "live", Some(range.clone()))?;
+            let (mut session, _) = self.take.to_session_of(wearer, "live", Some(range.clone()))?;
+            self.registration.apply(&mut session)?;
             let aligned =
                 align_on_timeline(&session, timeline, &AlignOptions { fps: self.fps, ..AlignOptions::default() })?;
             reconstruct_frame(engine, &aligned, index)
@@ -225,6 +297,7 @@ impl LiveReconstructor {
             tracked: recon.valid.get(index).copied().unwrap_or(false),
             skipped,
             wearers: if wearers.len() > 1 { wearers } else { Vec::new() },
+            observer_worlds: self.observer_worlds(),
         }))
     }
 }
@@ -280,6 +353,7 @@ impl LiveFrame {
             compute_ms: None,
             posted_ms: None,
             wearers: self.wearers.clone(),
+            observer_worlds: self.observer_worlds.clone(),
         }
     }
 }

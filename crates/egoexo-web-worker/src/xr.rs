@@ -15,7 +15,7 @@
 
 use egoexo_core::xr::{Hand, XrPose, XrPoseError, XrSpace, session_pose};
 use egoexo_protocol::live::{
-    ClientMessage, CloseKind, DataFrame, DeviceHello, DeviceRole, FramePayload, Join, JoinParseError,
+    ClientMessage, CloseKind, DataFrame, DeviceHello, DeviceRole, DeviceWorld, FramePayload, Join, JoinParseError,
     LIVE_PROTOCOL_VERSION, LiveLink, RelayMessage, Stream, valid_device_id,
 };
 
@@ -165,6 +165,9 @@ pub fn hello(join: &Join, device_id: &str) -> Result<String, XrError> {
             role: DeviceRole::Wearer,
             streams: XR_STREAMS.to_vec(),
             target: None,
+            // A headset's XR reference space is its own: Y-up, floor-level, but a yaw and a
+            // translation away from any other device's (`docs/registration.md`).
+            world: DeviceWorld::Own,
         }),
     };
     to_json(&message)
@@ -344,12 +347,13 @@ mod tests {
     }
 
     #[test]
-    fn the_hello_is_a_wearer_with_head_and_wrists() {
+    fn the_hello_is_a_wearer_with_head_and_wrists_in_a_world_of_its_own() {
         let json = hello(&Join::Code { code: "7KQ-M4T".into() }, " quest ").unwrap();
         assert_eq!(
             serde_json::from_str::<serde_json::Value>(&json).unwrap(),
             serde_json::json!({"type": "hello", "protocol": 1, "join": {"code": "7KQ-M4T"},
-                "device": {"id": "quest", "role": "wearer", "streams": ["head", "left-wrist", "right-wrist"]}})
+                "device": {"id": "quest", "role": "wearer", "streams": ["head", "left-wrist", "right-wrist"],
+                    "world": "own"}})
         );
         for bad in ["", "my quest", "<b>", &"x".repeat(65)] {
             let err = hello(&Join::Code { code: "7KQ-M4T".into() }, bad).unwrap_err().to_string();

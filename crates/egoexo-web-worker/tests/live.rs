@@ -9,11 +9,12 @@ use std::sync::Arc;
 
 use common::*;
 use egoexo_infer::{InferError, Method};
-use egoexo_protocol::live::{ChannelInfo, DataFrame, DeviceRole, FramePayload, RelayMessage, Stream};
+use egoexo_protocol::live::{ChannelInfo, DataFrame, DeviceRole, DeviceWorld, FramePayload, RelayMessage, Stream};
 use egoexo_scene::SceneData;
 use egoexo_session::{FileTree, ImportOptions, Limits, Session, import_session};
+use egoexo_synth::worlds::{WorldPerturbation, perturb_observer_worlds};
 use egoexo_web_worker::SessionWorker;
-use egoexo_web_worker::live::LiveReconstructor;
+use egoexo_web_worker::live::{LiveFrame, LiveReconstructor};
 
 fn worker() -> SessionWorker {
     worker_with(MANIFEST)
@@ -38,20 +39,24 @@ fn session() -> Session {
 fn as_relay(session: &Session, observers: bool) -> (Vec<RelayMessage>, Vec<DataFrame>) {
     let mut channels = Vec::new();
     let mut frames = Vec::new();
-    let mut add = |device: &str, role, stream, t: &egoexo_session::model::Trajectory| {
+    let world_of = |o: &egoexo_session::model::Observer| match o.placement.world {
+        egoexo_session::placement::WorldRef::Own => DeviceWorld::Own,
+        egoexo_session::placement::WorldRef::Shared => DeviceWorld::Shared,
+    };
+    let mut add = |device: &str, role, stream, t: &egoexo_session::model::Trajectory, world| {
         let channel = channels.len() as u16;
-        channels.push(ChannelInfo { channel, device: device.into(), role, stream, target: None });
+        channels.push(ChannelInfo { channel, device: device.into(), role, stream, target: None, world });
         for (ts, pose) in t.timestamps_ns.iter().zip(&t.poses) {
             frames.push(DataFrame { channel, timestamp_ns: *ts, payload: FramePayload::Pose(Some(*pose)) });
         }
     };
     let w = &session.wearer;
-    add("wearer", DeviceRole::Wearer, Stream::Head, &w.head);
-    add("wearer", DeviceRole::Wearer, Stream::LeftWrist, w.left_wrist.as_ref().unwrap());
-    add("wearer", DeviceRole::Wearer, Stream::RightWrist, w.right_wrist.as_ref().unwrap());
+    add("wearer", DeviceRole::Wearer, Stream::Head, &w.head, DeviceWorld::Shared);
+    add("wearer", DeviceRole::Wearer, Stream::LeftWrist, w.left_wrist.as_ref().unwrap(), DeviceWorld::Shared);
+    add("wearer", DeviceRole::Wearer, Stream::RightWrist, w.right_wrist.as_ref().unwrap(), DeviceWorld::Shared);
     let mut messages = Vec::new();
     for o in session.observers.iter().filter(|_| observers) {
-        add(&o.id, DeviceRole::Observer, Stream::Head, &o.head);
+        add(&o.id, DeviceRole::Observer, Stream::Head, &o.head, world_of(o));
         messages.push(RelayMessage::Calibration { device: o.id.clone(), camera: o.camera });
     }
     for o in session.observers.iter().filter(|_| observers) {
@@ -62,6 +67,7 @@ fn as_relay(session: &Session, observers: bool) -> (Vec<RelayMessage>, Vec<DataF
             role: DeviceRole::Observer,
             stream: Stream::Keypoints,
             target: None,
+            world: world_of(o),
         });
         let k = o.keypoints.as_ref().unwrap();
         for (ts, points) in k.timestamps_ns.iter().zip(&k.frames) {
@@ -208,7 +214,7 @@ fn capture_as_relay(capture: &egoexo_session::capture::Capture) -> (Vec<RelayMes
         let mut channel_of = |stream| {
             let channel = channels.len() as u16;
             let (id, role, target) = (device.hello.id.clone(), device.hello.role, device.hello.target.clone());
-            channels.push(ChannelInfo { channel, device: id, role, stream, target });
+            channels.push(ChannelInfo { channel, device: id, role, stream, target, world: device.hello.world });
             channel
         };
         for (stream, t) in &device.poses {
@@ -279,4 +285,110 @@ fn a_room_of_two_wearers_shows_both_and_keeps_a_capture() {
     let result = worker.reconstruct(false, &mut |_| true).unwrap();
     assert_eq!(result.participants.len(), 2);
     assert!(result.participants.iter().all(|p| p.method == "ego-exo"), "{:?}", result.participants);
+}
+
+/// The frames a reconstructor shows for `frames`, asked for on every third head pose (a busy
+/// worker).
+fn stream_live(worker: &mut SessionWorker, messages: &[RelayMessage], frames: &[DataFrame]) -> Vec<LiveFrame> {
+    let mut live = LiveReconstructor::new(worker.live_fps(), 8);
+    for m in messages {
+        live.handle_relay_message(m);
+    }
+    let mut shown = Vec::new();
+    let mut heads = 0;
+    for frame in frames {
+        live.add_frame(frame);
+        if frame.channel == 0 {
+            heads += 1;
+            if heads % 3 == 0
+                && let Some(f) = worker.live_frame(&mut live).unwrap()
+            {
+                shown.push(f);
+            }
+        }
+    }
+    shown
+}
+
+/// A worker with the shipped networks (`models/`): the skeleton must mean something.
+fn worker_with_shipped_models() -> SessionWorker {
+    let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models");
+    let manifest = std::fs::read(models.join("manifest.json")).unwrap();
+    let mut worker = SessionWorker::new();
+    worker
+        .load_models(&manifest, |file| {
+            std::fs::read(models.join(file))
+                .map_err(|e| InferError::ReadModel { file: file.into(), message: e.to_string() })
+        })
+        .unwrap();
+    worker
+}
+
+fn joints(frame: &LiveFrame) -> Vec<f32> {
+    serde_json::from_slice::<SceneData>(&frame.scene_json).unwrap().joints
+}
+
+#[test]
+fn observers_in_worlds_of_their_own_are_registered_while_they_stream_then_fused_as_in_the_shared_world() {
+    let mut worker = worker_with_shipped_models();
+    // 16 s of a wearer wandering (turning, walking) watched by two observers.
+    let config = egoexo_synth::SynthConfig { observers: 2, ..egoexo_synth::SynthConfig::default() };
+    let shared =
+        egoexo_synth::simulate(&egoexo_synth::procedural::wandering(16.0), "wander", &config, 7).unwrap().session;
+    let mut own = shared.clone();
+    let truth = perturb_observer_worlds(&mut own, &WorldPerturbation::default(), 11);
+    let (messages, frames) = as_relay(&shared, true);
+    let reference = stream_live(&mut worker, &messages, &frames);
+    let (messages, frames) = as_relay(&own, true);
+    let shown = stream_live(&mut worker, &messages, &frames);
+    assert_eq!(shown.len(), reference.len());
+    let first_ns = shared.wearer.head.timestamps_ns[0];
+    let registered =
+        |f: &LiveFrame| f.observer_worlds.len() == 2 && f.observer_worlds.iter().all(|o| o.state == "registered");
+    let span_s = (shared.wearer.head.timestamps_ns.last().unwrap() - first_ns) as f64 / 1e9;
+    let Some(at) = shown.iter().position(registered) else {
+        panic!("not registered in {span_s:.1} s: {:#?}", shown.last().unwrap().observer_worlds)
+    };
+    let after_s = (shown[at].timestamp_ns - first_ns) as f64 / 1e9;
+    eprintln!(
+        "registered {after_s:.1} s into the stream (of {:.1} s): {:#?}",
+        (shared.wearer.head.timestamps_ns.last().unwrap() - first_ns) as f64 / 1e9,
+        shown[at].observer_worlds
+    );
+    assert!(after_s <= 10.0 + 8.0 / 30.0, "registered {after_s:.1} s into the stream");
+    // Until then the own worlds are not fused: every frame is the wearer alone.
+    for f in &shown[..at] {
+        assert!(f.exo_observers.is_empty(), "frame {} fused {:?} before registration", f.frame, f.exo_observers);
+        assert!(f.observer_worlds.iter().all(|o| o.state == "registering" && o.message.starts_with("registering")));
+    }
+    // The registration is the truth within its uncertainty (and the goal's 1°, 3 cm).
+    for (o, t) in shown.last().unwrap().observer_worlds.iter().zip(&truth) {
+        assert_eq!(o.observer, t.id);
+        let yaw_error = ((o.yaw_deg.unwrap() - t.yaw_deg() + 540.0).rem_euclid(360.0) - 180.0).abs();
+        let [x, y, z] = o.translation_m.unwrap();
+        let moved = egoexo_core::glam::Vec3::new(x as f32, y as f32, z as f32).distance(t.t_session_world.translation);
+        eprintln!("{}: yaw error {yaw_error:.2}°, translation error {:.1} cm", o.observer, moved * 100.0);
+        assert!(yaw_error < 1.0 && moved < 0.05, "{o:?} against {t:?}");
+    }
+    // Then the frames are the shared world's: the same observers fused, the same skeleton.
+    let mut worst = 0.0f32;
+    let mut differences = Vec::new();
+    for (f, r) in shown[at..].iter().zip(&reference[at..]) {
+        assert_eq!(f.frame, r.frame);
+        assert_eq!(f.exo_observers, r.exo_observers, "frame {}", f.frame);
+        let (a, b) = (joints(f), joints(r));
+        for (p, q) in a.chunks(3).zip(b.chunks(3)) {
+            let d = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
+            worst = worst.max(d);
+            differences.push(d);
+        }
+    }
+    differences.sort_by(f32::total_cmp);
+    let median = differences[differences.len() / 2];
+    eprintln!(
+        "after registration the skeleton's joints are within {:.1} cm (median {:.2} cm) of the shared world's",
+        worst * 100.0,
+        median * 100.0
+    );
+    assert!(median < 0.01 && worst < 0.05, "median {median} m, worst {worst} m");
 }

@@ -205,11 +205,18 @@ impl Room {
                     role: hello.role,
                     stream,
                     target: hello.target.clone(),
+                    world: hello.world,
                 });
                 inner.history.push(VecDeque::new());
                 entry.insert(channel);
                 changed = true;
             }
+        }
+        // A device that connects again in another world (a headset told its world is its own
+        // now) says so on every channel it had.
+        for channel in inner.channels.iter_mut().filter(|c| c.device == hello.id && c.world != hello.world) {
+            channel.world = hello.world;
+            changed = true;
         }
         let mut previous = inner.devices.remove(&hello.id);
         if let Some(previous) = previous.as_mut() {

@@ -2,7 +2,10 @@
 //! in real time as its devices would, one WebSocket per device (the wearer; each observer with
 //! its camera and keypoints). Each device has its own clock (a random offset and drift from
 //! the relay's) and its frames leave with network jitter; faults (a device leaving and coming
-//! back, a clock that jumps) can be injected. The demo source and the load generator.
+//! back, a clock that jumps) can be injected. With `--own-worlds` every observer streams in
+//! a world of its own (moved by a random yaw and translation, its hello saying so) and
+//! `--recentre` makes a device's world jump mid-stream, as a re-centred headset's does: the
+//! test of the viewers' registration. The demo source and the load generator.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -10,6 +13,8 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use egoexo_core::camera::CameraCalibration;
+use egoexo_core::glam::{Quat, Vec3};
+use egoexo_core::rigid::RigidTransform;
 use egoexo_protocol::live::{
     ClientMessage, DataFrame, DeviceHello, DeviceRole, FramePayload, Join, LIVE_PROTOCOL_VERSION, LiveLink, Stream,
 };
@@ -17,6 +22,7 @@ use egoexo_session::align::resample_trajectory;
 use egoexo_session::import::import_capture_path;
 use egoexo_session::live::{CaptureDevice, capture_devices};
 use egoexo_session::model::Trajectory;
+use egoexo_synth::worlds::{WorldPerturbation, perturb_capture_worlds};
 use futures::SinkExt;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -79,6 +85,58 @@ pub struct Args {
     /// A device's clock jumps by ±SECONDS at AT: `ID@AT+SECONDS` or `ID@AT-SECONDS`. Repeatable.
     #[arg(long = "clock-jump", value_parser = parse_fault, value_name = "ID@AT±S")]
     pub clock_jumps: Vec<Fault>,
+    /// Every observer (in a capture of several, every participant but the first) streams in a
+    /// world of its own: its poses moved by a random yaw (any), a translation (up to 10 m) and
+    /// a floor offset (±0.3 m), drawn from `--seed`, and its hello says `"world": "own"`. The
+    /// truth is in the summary (`worlds`).
+    #[arg(long)]
+    pub own_worlds: bool,
+    /// A device's world jumps at AT seconds into the replay (`ID@AT`), as a headset's does when
+    /// it re-centres: its poses from then on are moved by another random yaw and translation
+    /// (up to 3 m). Repeatable.
+    #[arg(long = "recentre", value_parser = parse_recentre, value_name = "ID@AT")]
+    pub recentres: Vec<Recentre>,
+}
+
+/// A device's world jumping at a time into the replay.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Recentre {
+    pub device: String,
+    pub at_s: f64,
+}
+
+fn parse_recentre(text: &str) -> Result<Recentre, String> {
+    let expected = || format!("`{text}`: expected ID@AT (e.g. observer-1@8)");
+    let (device, at) = text.split_once('@').ok_or_else(expected)?;
+    let at_s: f64 = at.parse().map_err(|_| expected())?;
+    if device.is_empty() || !at_s.is_finite() || at_s < 0.0 {
+        return Err(expected());
+    }
+    Ok(Recentre { device: device.to_string(), at_s })
+}
+
+/// The world a device streamed in, against the session's (the truth for a registration).
+#[derive(Clone, Debug, Serialize)]
+pub struct WorldReport {
+    pub id: String,
+    /// Seconds into the replay from which this world holds (0, or a `--recentre`).
+    pub from_s: f64,
+    /// `p_session = R_y(yaw_deg) · p_device_world + translation_m`.
+    pub yaw_deg: f64,
+    pub translation_m: [f64; 3],
+}
+
+impl WorldReport {
+    fn new(id: &str, from_s: f64, t_session_world: &RigidTransform) -> Self {
+        let forward = t_session_world.rotation * Vec3::X;
+        let t = t_session_world.translation;
+        Self {
+            id: id.to_string(),
+            from_s,
+            yaw_deg: f64::from((-forward.z).atan2(forward.x)).to_degrees(),
+            translation_m: [f64::from(t.x), f64::from(t.y), f64::from(t.z)],
+        }
+    }
 }
 
 /// A fault for one device at a time into the replay.
@@ -192,10 +250,11 @@ fn plan_devices(devices: Vec<CaptureDevice>, args: &Args) -> Result<(Vec<DeviceP
     for plan in &mut plans {
         plan.samples.sort_by_key(|s| s.t_ns);
     }
-    for fault in args.disconnects.iter().chain(&args.clock_jumps) {
-        if !plans.iter().any(|p| p.hello.id == fault.device) {
+    let faulted = args.disconnects.iter().chain(&args.clock_jumps).map(|f| &f.device);
+    for device in faulted.chain(args.recentres.iter().map(|r| &r.device)) {
+        if !plans.iter().any(|p| p.hello.id == *device) {
             let ids: Vec<_> = plans.iter().map(|p| p.hello.id.as_str()).collect();
-            bail!("no device `{}` in this replay (devices: {})", fault.device, ids.join(", "));
+            bail!("no device `{device}` in this replay (devices: {})", ids.join(", "));
         }
     }
     Ok((plans, range))
@@ -251,6 +310,48 @@ pub struct DeviceReport {
 pub struct ReplayReport {
     pub devices: Vec<DeviceReport>,
     pub session_span_s: f64,
+    /// With `--own-worlds` or `--recentre`: each moved device's world against the session's.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub worlds: Vec<WorldReport>,
+}
+
+/// Moves the pose samples of each `--recentre`d device from its time on by a random yaw and
+/// translation (up to 3 m), as a re-centred headset's world jumps; the worlds it streams in
+/// from then on (`T_session_world`, composed with the world it was in) are returned.
+fn recentre_worlds(
+    plans: &mut [DevicePlan],
+    range: (i64, i64),
+    args: &Args,
+    before: &[WorldReport],
+    rng: &mut ChaCha8Rng,
+) -> Vec<WorldReport> {
+    let mut worlds = Vec::new();
+    for recentre in &args.recentres {
+        let Some(plan) = plans.iter_mut().find(|p| p.hello.id == recentre.device) else { continue };
+        let yaw = rng.random_range(-std::f32::consts::PI..std::f32::consts::PI);
+        let (distance, heading) = (rng.random_range(0.5f32..3.0), rng.random_range(0.0..std::f32::consts::TAU));
+        // The jump: new world ← old world.
+        let jump = RigidTransform {
+            rotation: Quat::from_rotation_y(yaw),
+            translation: Vec3::new(distance * heading.cos(), 0.0, distance * heading.sin()),
+        };
+        let from_ns = range.0 + (recentre.at_s * 1e9) as i64;
+        for sample in plan.samples.iter_mut().filter(|s| s.t_ns >= from_ns) {
+            if let FramePayload::Pose(Some(pose)) = &mut sample.payload {
+                *pose = jump * *pose;
+            }
+        }
+        // T_session_newworld = T_session_oldworld · jump⁻¹.
+        let old = before.iter().rev().find(|w| w.id == recentre.device).map_or(RigidTransform::IDENTITY, |w| {
+            let [x, y, z] = w.translation_m;
+            RigidTransform {
+                rotation: Quat::from_rotation_y((w.yaw_deg as f32).to_radians()),
+                translation: Vec3::new(x as f32, y as f32, z as f32),
+            }
+        });
+        worlds.push(WorldReport::new(&recentre.device, recentre.at_s, &(old * jump.inverse())));
+    }
+    worlds
 }
 
 struct DeviceRun {
@@ -368,9 +469,23 @@ pub fn run(args: Args) -> Result<()> {
     }
     let server = ServerAddress::parse(&args.url)?;
     // A capture of several participants streams every one of them as a wearer.
-    let imported = import_capture_path(&args.session, &args.import.import_options()?)?;
+    let mut imported = import_capture_path(&args.session, &args.import.import_options()?)?;
     let name = imported.capture.name.clone();
-    let (plans, range) = plan_devices(capture_devices(&imported.capture)?, &args)?;
+    let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
+    let mut worlds = Vec::new();
+    if args.own_worlds {
+        let truth = perturb_capture_worlds(&mut imported.capture, &WorldPerturbation::default(), args.seed);
+        worlds.extend(truth.iter().map(|t| WorldReport::new(&t.id, 0.0, &t.t_session_world)));
+    }
+    let (mut plans, range) = plan_devices(capture_devices(&imported.capture)?, &args)?;
+    let recentred = recentre_worlds(&mut plans, range, &args, &worlds, &mut rng);
+    worlds.extend(recentred);
+    for w in &worlds {
+        eprintln!(
+            "{} streams in a world of its own from {:.1} s: yaw {:.1}°, translation ({:.2}, {:.2}, {:.2}) m",
+            w.id, w.from_s, w.yaw_deg, w.translation_m[0], w.translation_m[1], w.translation_m[2]
+        );
+    }
     let join = match &args.room {
         Some(room) => client::parse_join(room)?,
         None => {
@@ -383,7 +498,6 @@ pub fn run(args: Args) -> Result<()> {
             Join::Secret { room: device.room, secret: device.secret }
         }
     };
-    let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
     let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
     let session_span_s = (range.1 - range.0) as f64 / 1e9;
     eprintln!(
@@ -445,7 +559,7 @@ pub fn run(args: Args) -> Result<()> {
         for task in tasks {
             devices.push(task.await.context("a device task")??);
         }
-        let report = ReplayReport { devices, session_span_s };
+        let report = ReplayReport { devices, session_span_s, worlds };
         println!("{}", serde_json::to_string(&report)?);
         Ok(())
     })
@@ -454,8 +568,6 @@ pub fn run(args: Args) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use egoexo_core::glam::Vec3;
-    use egoexo_core::rigid::RigidTransform;
 
     #[test]
     fn faults_parse() {
@@ -466,6 +578,51 @@ mod tests {
         assert_eq!(parse_fault("wearer@3-0.5").unwrap().value_s, -0.5);
         for bad in ["wearer", "wearer@3", "@3+1", "wearer@x+1", "wearer@-1+1"] {
             assert!(parse_fault(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn a_recentre_moves_the_poses_after_it_and_reports_the_world_they_are_in() {
+        use clap::Parser;
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            args: Args,
+        }
+        let cli = Cli::parse_from(["replay", "s.egoexo", "--url", "http://127.0.0.1:1", "--recentre", "observer-1@1"]);
+        assert_eq!(cli.args.recentres, [Recentre { device: "observer-1".into(), at_s: 1.0 }]);
+        assert!(
+            parse_recentre("observer-1").is_err() && parse_recentre("@2").is_err() && parse_recentre("a@-1").is_err()
+        );
+        // Two seconds of a device standing at (1, 1.6, 0) in the session's world, 10 Hz.
+        let pose = RigidTransform { translation: Vec3::new(1.0, 1.6, 0.0), ..RigidTransform::IDENTITY };
+        let samples = (0..20)
+            .map(|i| Sample { t_ns: i * 100_000_000, stream: Stream::Head, payload: FramePayload::Pose(Some(pose)) })
+            .collect();
+        let hello = DeviceHello {
+            id: "observer-1".into(),
+            role: DeviceRole::Observer,
+            streams: vec![Stream::Head],
+            target: None,
+            world: Default::default(),
+        };
+        let mut plans = vec![DevicePlan { hello, camera: None, samples }];
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let worlds = recentre_worlds(&mut plans, (0, 1_900_000_000), &cli.args, &[], &mut rng);
+        assert_eq!(worlds.len(), 1);
+        let world = RigidTransform {
+            rotation: Quat::from_rotation_y((worlds[0].yaw_deg as f32).to_radians()),
+            translation: Vec3::from_array(worlds[0].translation_m.map(|v| v as f32)),
+        };
+        for s in &plans[0].samples {
+            let FramePayload::Pose(Some(p)) = s.payload else { panic!() };
+            if s.t_ns < 1_000_000_000 {
+                assert_eq!(p, pose);
+            } else {
+                // Moved into a new world, which the report maps back to the session's.
+                assert!(p.translation.distance(pose.translation) > 0.4);
+                assert!((world * p).translation.distance(pose.translation) < 1e-4);
+            }
         }
     }
 

@@ -7,9 +7,10 @@
 //!
 //! - **registering** — not fused; the wearer is reconstructed from the ego signals. Once
 //!   [`RollingSettings::min_views_s`] of views are in, every [`RollingSettings::interval_s`]
-//!   the solver runs on the last [`RollingSettings::window_s`]; a solution is taken when two
-//!   in a row are `registered` and agree within their uncertainty (one lucky solve is not
-//!   trusted).
+//!   the solver runs on the last [`RollingSettings::window_s`]; a solution is taken when a
+//!   later solve is `registered` too and agrees with it within their uncertainty (one lucky
+//!   solve is not trusted; a solve that finds too little motion in between does not refute
+//!   it, one that finds the views inconsistent does).
 //! - **registered** — fused: every window's observer poses are mapped into the wearer's world.
 //!   Every [`RollingSettings::check_interval_s`] it is solved again on the newest views: the
 //!   same world (within the uncertainty) refines the estimate; another one drops it — back to
@@ -241,7 +242,11 @@ impl RollingRegistration {
                             }
                         }
                         Ok(found) => {
-                            entry.candidate = None;
+                            // Too little motion in this window says nothing against a
+                            // candidate; views no transform explains do.
+                            if found.as_ref().is_some_and(|r| r.status == RegistrationStatus::Inconsistent) {
+                                entry.candidate = None;
+                            }
                             entry.message = match found {
                                 Some(r) => format!(
                                     "registering — {:.0} s of views ({}: {})",
@@ -380,7 +385,7 @@ fn solve(
 }
 
 /// Two solutions agree: their yaw and translation differ by at most three of their combined
-/// σ (with a floor of 0.5° and 3 cm).
+/// σ (with a floor of 1° and 5 cm: the coarse body's bias moves solves of overlapping windows by more than their σ).
 fn consistent(a: &Registration, b: &Registration) -> bool {
     let combined = |x: Option<f64>, y: Option<f64>| (x.unwrap_or(0.0).powi(2) + y.unwrap_or(0.0).powi(2)).sqrt();
     let mut yaw = (a.yaw_deg - b.yaw_deg).rem_euclid(360.0);
@@ -388,8 +393,8 @@ fn consistent(a: &Registration, b: &Registration) -> bool {
         yaw = 360.0 - yaw;
     }
     let moved = a.transform.translation.distance(b.transform.translation) as f64;
-    yaw <= 3.0 * combined(a.sigma_yaw_deg, b.sigma_yaw_deg) + 0.5
-        && moved <= 3.0 * combined(a.sigma_translation_m, b.sigma_translation_m) + 0.03
+    yaw <= 3.0 * combined(a.sigma_yaw_deg, b.sigma_yaw_deg) + 1.0
+        && moved <= 3.0 * combined(a.sigma_translation_m, b.sigma_translation_m) + 0.05
 }
 
 fn format_translation(r: &Registration) -> String {

@@ -585,6 +585,19 @@ fn observers_in_worlds_of_their_own_are_registered_when_the_session_opens() {
     }
     let recon = worker.reconstruct(false, &mut |_| true).unwrap();
     assert!(recon.observer_ray_frames.values().all(|&frames| frames > 300), "{:?}", recon.observer_ray_frames);
+    // A share carries what registration did: its summary, and the recording with each
+    // observer moved and its registration recorded (opened again, nothing is re-registered).
+    let share = worker.pack_share(true, "test").unwrap();
+    let mut other = worker_with_models();
+    let opened = other.open_share(share).unwrap();
+    let shared = &opened.manifest.session.observers;
+    assert!(shared.len() == 2 && shared.iter().all(|o| o.fused && o.world.contains("registered (yaw")));
+    let reopened = other.session_summary().unwrap();
+    assert_eq!(reopened.observers.len(), 2);
+    for o in &reopened.observers {
+        assert!(o.fused && o.world.contains("registered (yaw"), "{}: {}", o.id, o.world);
+    }
+    assert!(reopened.warnings.iter().all(|w| !w.contains("its world is its own")), "{:?}", reopened.warnings);
 
     // An observer seeing someone else entirely (another walk's keypoints) is left out, and
     // the summary says why.

@@ -35,7 +35,8 @@ use egoexo_session::align::{AlignError, AlignOptions, align};
 use egoexo_session::model::{ContextFeatureTrack, Observer, Session, Trajectory, VideoRef};
 use egoexo_session::placement::{ClockRef, Placement, RegistrationRecord, WorldRef, describe_registration};
 use egoexo_solve::registration::{
-    Dof, RegisterOptions, Registration, RegistrationError, RegistrationStatus, TargetTrack, check_agreement, register,
+    Agreement, Dof, RegisterOptions, Registration, RegistrationError, RegistrationStatus, TargetTrack, check_agreement,
+    register,
 };
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -241,22 +242,7 @@ pub fn register_session(
                 } else {
                     format!("{:.1} s of views are too few to check the given world; kept as given", agreement.view_s)
                 };
-                let result = Registration::as_given(
-                    agreement.frames,
-                    agreement.inlier_frames,
-                    agreement.view_s,
-                    agreement.inlier_view_s,
-                    agreement.median_residual_deg,
-                    reason.clone(),
-                );
-                session.observers[o].placement.registration =
-                    Some(RegistrationRecord { result: result.clone(), applied: false });
-                report.observers.push(ObserverReport {
-                    id,
-                    outcome: Outcome::Kept,
-                    registration: Some(result),
-                    message: reason,
-                });
+                report.observers.push(keep_as_given(&mut session.observers[o], &agreement, reason));
                 continue;
             }
             if agreement.fits {
@@ -282,22 +268,7 @@ pub fn register_session(
                 "the given world explains {} of {} frames over {:.1} s; registration found nothing surer ({}: {}); kept as given",
                 agreement.inlier_frames, agreement.frames, agreement.view_s, result.status, result.reason
             );
-            let kept = Registration::as_given(
-                agreement.frames,
-                agreement.inlier_frames,
-                agreement.view_s,
-                agreement.inlier_view_s,
-                agreement.median_residual_deg,
-                reason.clone(),
-            );
-            session.observers[o].placement.registration =
-                Some(RegistrationRecord { result: kept.clone(), applied: false });
-            report.observers.push(ObserverReport {
-                id,
-                outcome: Outcome::Kept,
-                registration: Some(kept),
-                message: reason,
-            });
+            report.observers.push(keep_as_given(&mut session.observers[o], &agreement, reason));
             continue;
         }
         let observer = &mut session.observers[o];
@@ -316,6 +287,21 @@ pub fn register_session(
         report.observers.push(ObserverReport { id, outcome, registration: Some(result), message });
     }
     Ok(report)
+}
+
+/// Keeps `observer`'s given world, which `agreement` found to explain its views: the verdict
+/// `as-given` is recorded (not applied: nothing moves) and reported with `reason`.
+fn keep_as_given(observer: &mut Observer, agreement: &Agreement, reason: String) -> ObserverReport {
+    let result = Registration::as_given(
+        agreement.frames,
+        agreement.inlier_frames,
+        agreement.view_s,
+        agreement.inlier_view_s,
+        agreement.median_residual_deg,
+        reason.clone(),
+    );
+    observer.placement.registration = Some(RegistrationRecord { result: result.clone(), applied: false });
+    ObserverReport { id: observer.id.clone(), outcome: Outcome::Kept, registration: Some(result), message: reason }
 }
 
 /// An observer a mode leaves alone: already registered (`auto`), or anything (`off`).

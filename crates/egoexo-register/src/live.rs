@@ -222,14 +222,8 @@ impl RollingRegistration {
                         Ok(Some(found)) if found.status == RegistrationStatus::Registered => {
                             let confirmed = entry.candidate.as_ref().is_some_and(|c| consistent(c, &found));
                             if confirmed {
-                                entry.message = format!(
-                                    "registered after {:.1} s of views: yaw {:.1}° ± {:.1}°, translation {} ± {:.1} cm",
-                                    entry.views_s,
-                                    found.yaw_deg,
-                                    found.sigma_yaw_deg.unwrap_or(f64::NAN),
-                                    format_translation(&found),
-                                    found.sigma_translation_m.unwrap_or(f64::NAN) * 100.0,
-                                );
+                                entry.message =
+                                    format!("registered after {:.1} s of views: {}", entry.views_s, estimate(&found));
                                 entry.state = RollingState::Registered;
                                 entry.registration = Some(found);
                                 entry.candidate = None;
@@ -278,14 +272,8 @@ impl RollingRegistration {
                         continue;
                     }
                     if consistent(&current, &found) {
-                        entry.message = format!(
-                            "registered over {:.0} s of views: yaw {:.1}° ± {:.1}°, translation {} ± {:.1} cm",
-                            entry.views_s,
-                            found.yaw_deg,
-                            found.sigma_yaw_deg.unwrap_or(f64::NAN),
-                            format_translation(&found),
-                            found.sigma_translation_m.unwrap_or(f64::NAN) * 100.0,
-                        );
+                        entry.message =
+                            format!("registered over {:.0} s of views: {}", entry.views_s, estimate(&found));
                         entry.registration = Some(found);
                         continue;
                     }
@@ -397,9 +385,15 @@ fn consistent(a: &Registration, b: &Registration) -> bool {
         && moved <= 3.0 * combined(a.sigma_translation_m, b.sigma_translation_m) + 0.05
 }
 
-fn format_translation(r: &Registration) -> String {
+/// A registration in words: yaw and translation with their 1σ.
+fn estimate(r: &Registration) -> String {
     let [x, y, z] = r.translation_m();
-    format!("({x:.2}, {y:.2}, {z:.2}) m")
+    format!(
+        "yaw {:.1}° ± {:.1}°, translation ({x:.2}, {y:.2}, {z:.2}) m ± {:.1} cm",
+        r.yaw_deg,
+        r.sigma_yaw_deg.unwrap_or(f64::NAN),
+        r.sigma_translation_m.unwrap_or(f64::NAN) * 100.0
+    )
 }
 
 /// Seconds of views of `observer` since `since_ns` (frames with a detected keypoint, each

@@ -27,8 +27,9 @@ use egoexo_register::{RegisterSettings, register_session};
 use egoexo_session::Session;
 use egoexo_session::align::{AlignOptions, align};
 use egoexo_session::placement::{RegistrationStatus, WorldRef};
+use egoexo_synth::config::DeviceNoise;
 use egoexo_synth::config::{DetectorModel, OcclusionConfig};
-use egoexo_synth::worlds::{WorldPerturbation, WorldTruth, perturb_observer_worlds};
+use egoexo_synth::worlds::{WorldPerturbation, WorldTruth, perturb_observer_worlds, unpose_static_cameras};
 use egoexo_synth::{SynthConfig, simulate};
 use serde::{Deserialize, Serialize};
 
@@ -106,6 +107,11 @@ pub struct RegistrationEvalOptions {
     pub conditions: Vec<DetectorCondition>,
     /// Also reconstruct (ego-only, ego-exo with true / registered / moved-as-shared worlds).
     pub mpjpe: bool,
+    /// The observers are static cameras that know nothing of their pose
+    /// (`ObserverBehaviour::static_camera`, `unpose_static_cameras`; focal length known):
+    /// registered in 6 DoF instead of moved by a yaw and a translation.
+    #[serde(default)]
+    pub static_cameras: bool,
 }
 
 /// One row of table (a).
@@ -150,6 +156,9 @@ pub struct RegistrationReport {
     pub sessions: usize,
     pub seconds: f64,
     pub tracking: u8,
+    /// The observers were static cameras without pose (6 DoF).
+    #[serde(default)]
+    pub static_cameras: bool,
     pub rows: Vec<RegistrationRow>,
     pub mpjpe: Option<WorldMpjpe>,
     /// With the MPJPE table: milliseconds of registering a session with all its views, and of
@@ -316,11 +325,20 @@ pub fn evaluate_registration(
             let mut config =
                 SynthConfig { tracking: options.tracking, observers: options.observers, ..SynthConfig::default() };
             condition.apply(&mut config);
+            if options.static_cameras {
+                // A tripod's pose is exact: the truth is where it stands.
+                config.observer.static_camera = true;
+                config.observer_noise = DeviceNoise::none();
+            }
             let seed = mix(options.seed, chain as u64, 0x5e61);
             let original =
                 simulate(motion, label, &config, seed).map_err(|e| DatasetError::Simulate(e.to_string()))?.session;
             let mut moved = original.clone();
-            let truth = perturb_observer_worlds(&mut moved, &WorldPerturbation::default(), seed);
+            let truth = if options.static_cameras {
+                unpose_static_cameras(&mut moved, true)
+            } else {
+                perturb_observer_worlds(&mut moved, &WorldPerturbation::default(), seed)
+            };
             for (v, &seconds) in options.visibility_s.iter().enumerate() {
                 let mut limited = moved.clone();
                 let kept = limit_views(&mut limited, seconds, fps);
@@ -391,6 +409,7 @@ pub fn evaluate_registration(
         sessions: chains.len(),
         seconds: chains.iter().map(|(_, m)| m.poses.len() as f64 / f64::from(m.fps)).sum(),
         tracking: options.tracking.points(),
+        static_cameras: options.static_cameras,
         rows,
         mpjpe: (options.mpjpe && scored_frames > 0).then(|| WorldMpjpe {
             sessions: chains.len(),
@@ -409,9 +428,14 @@ pub fn evaluate_registration(
 pub fn format_registration_table(report: &RegistrationReport) -> String {
     use std::fmt::Write;
     let mut out = String::new();
+    let what = if report.static_cameras {
+        "static cameras without pose (6 DoF: their pose in the wearer's world; focal length known)"
+    } else {
+        "observers moved into worlds of their own (any yaw, ≤ 10 m, ±0.3 m floor)"
+    };
     let _ = writeln!(
         out,
-        "Registration of observers moved into worlds of their own (any yaw, ≤ 10 m, ±0.3 m floor): {} clips of subjects {:?} chained into {} sessions ({:.0} s), {}-point",
+        "Registration of {what}: {} clips of subjects {:?} chained into {} sessions ({:.0} s), {}-point",
         report.clips, report.subjects, report.sessions, report.seconds, report.tracking
     );
     let _ = writeln!(

@@ -18,7 +18,9 @@ use egoexo_session::align::{AlignOptions, align};
 use egoexo_session::placement::{RegistrationStatus, WorldRef};
 use egoexo_synth::group::{GroupConfig, group_walk, simulate_group};
 use egoexo_synth::procedural::{walking_circle, wandering};
-use egoexo_synth::worlds::{WorldPerturbation, WorldTruth, perturb_capture_worlds, perturb_observer_worlds};
+use egoexo_synth::worlds::{
+    WorldPerturbation, WorldTruth, perturb_capture_worlds, perturb_observer_worlds, unpose_static_cameras,
+};
 use egoexo_synth::{SynthConfig, simulate};
 
 fn engine() -> Engine {
@@ -213,4 +215,28 @@ fn a_clock_offset_on_a_circle_walked_at_constant_speed_is_never_confidently_wron
     if r.outcome == Outcome::LeftOut {
         assert_eq!(found.status, RegistrationStatus::NotEnoughMotion, "{}", r.message);
     }
+}
+
+#[test]
+fn a_static_camera_without_pose_is_placed_in_the_wearers_world() {
+    // Two tripods aimed at the middle of the wearer's wandering path, knowing nothing of their
+    // pose: registered in 6 DoF, each lands where it stands.
+    let mut config = SynthConfig { observers: 2, tracking: TrackingMode::OnePoint, ..SynthConfig::default() };
+    config.observer.static_camera = true;
+    config.observer_noise = egoexo_synth::config::DeviceNoise::none();
+    let original = simulate(&wandering(20.0), "tripods", &config, 31).unwrap().session;
+    assert!(original.observers.iter().all(|o| o.head.poses.windows(2).all(|w| w[0] == w[1])), "tripods do not move");
+    let mut s = original.clone();
+    let truth = unpose_static_cameras(&mut s, true);
+    assert!(s.observers.iter().all(|o| !o.placement.fusable()));
+    let report =
+        register_session(Some(&engine()), TrackingMode::OnePoint, &mut s, &settings(RegisterMode::Auto)).unwrap();
+    for (r, t) in report.observers.iter().zip(&truth) {
+        let found = r.registration.as_ref().unwrap();
+        assert_eq!(r.outcome, Outcome::Registered, "{}: {}", r.id, r.message);
+        assert_eq!(found.dof, egoexo_solve::registration::Dof::Six);
+        let (deg, m) = error(&found.transform, t, scene_centre(&original));
+        assert!(deg < 2.0 && m < 0.05, "{}: {deg}°, {m} m", r.id);
+    }
+    assert!(s.observers.iter().all(|o| o.placement.fusable()));
 }

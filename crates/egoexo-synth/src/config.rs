@@ -153,6 +153,11 @@ pub struct ObserverBehaviour {
     pub look_away_interval_s: f32,
     /// Look-away span, uniform range (s).
     pub look_away_duration_s: (f32, f32),
+    /// Static cameras (a webcam, a GoPro on a tripod) instead of people: each stands where an
+    /// observer would start, at eye height, aimed at the middle of the wearer's whole path, and
+    /// never moves (no walking, sway, saccades or look-aways).
+    #[serde(default)]
+    pub static_camera: bool,
 }
 
 impl Default for ObserverBehaviour {
@@ -167,6 +172,7 @@ impl Default for ObserverBehaviour {
             saccade_amplitude_rad: (3f32.to_radians(), 12f32.to_radians()),
             look_away_interval_s: 12.0,
             look_away_duration_s: (0.5, 5.0),
+            static_camera: false,
         }
     }
 }

@@ -49,6 +49,13 @@ pub fn simulate_observer(
     let mut position = horizontal(start) + distance * Vec3::new(bearing.sin(), 0.0, bearing.cos());
     let sway_phase = rng.uniform(0.0, std::f32::consts::TAU);
     let anchor = position;
+    if behaviour.static_camera {
+        // A tripod: one pose, aimed at the middle of the wearer's path.
+        let middle = wearer_chest.iter().copied().sum::<Vec3>() / n.max(1) as f32;
+        let eye = Vec3::new(anchor.x, floor_y + eye_height, anchor.z);
+        let pose = RigidTransform::cpf_looking_at(eye, middle);
+        return ObserverTrack { head: vec![pose; n], looking_away: vec![false; n], walking: false };
+    }
 
     // Gaze state.
     let mut gaze = Vec3::ZERO; // current look direction (unit), set on the first frame

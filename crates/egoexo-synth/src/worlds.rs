@@ -8,7 +8,7 @@ use egoexo_core::glam::{Quat, Vec3};
 use egoexo_core::rigid::RigidTransform;
 use egoexo_session::capture::{Capture, ViewPeople};
 use egoexo_session::model::{Session, Trajectory};
-use egoexo_session::placement::{ClockRef, WorldRef};
+use egoexo_session::placement::{ClockRef, Placement, WorldRef};
 use serde::{Deserialize, Serialize};
 
 use crate::rng::SimRng;
@@ -134,6 +134,22 @@ pub fn perturb_capture_worlds(capture: &mut Capture, perturbation: &WorldPerturb
             p.placement.clock = ClockRef::Own;
         }
         truth.push(WorldTruth { id: p.id.clone(), t_session_world: t, clock_offset_s });
+    }
+    truth
+}
+
+/// Makes every observer of `session` (simulated as static cameras:
+/// `ObserverBehaviour::static_camera`) a static camera that knows nothing of its pose: its
+/// poses become the identity (its own world is its device frame), its placement
+/// [`Placement::fixed_unposed`] with the focal length known or not; returns the truth per
+/// observer (`T_session_observerworld` = its true pose).
+pub fn unpose_static_cameras(session: &mut Session, focal_known: bool) -> Vec<WorldTruth> {
+    let mut truth = Vec::new();
+    for observer in &mut session.observers {
+        let pose = observer.head.poses.first().copied().unwrap_or(RigidTransform::IDENTITY);
+        observer.head.poses.fill(RigidTransform::IDENTITY);
+        observer.placement = Placement::fixed_unposed(focal_known);
+        truth.push(WorldTruth { id: observer.id.clone(), t_session_world: pose, clock_offset_s: 0.0 });
     }
     truth
 }

@@ -56,6 +56,11 @@ pub struct Args {
     /// Detector conditions of the registration table: clean, simulator, harsh.
     #[arg(long, value_delimiter = ',', value_parser = parse_condition, default_value = "clean,simulator,harsh", requires = "perturb_worlds")]
     pub detector: Vec<DetectorCondition>,
+    /// With --perturb-worlds: the observers are static cameras (on tripods, aimed at the middle
+    /// of the wearer's path) that know nothing of their pose: each is registered in 6 DoF (its
+    /// pose in the wearer's world). No MPJPE table.
+    #[arg(long, requires = "perturb_worlds")]
+    pub static_cameras: bool,
 }
 
 fn parse_condition(s: &str) -> Result<DetectorCondition, String> {
@@ -160,7 +165,8 @@ fn run_registration(
         seed: sim.seed,
         visibility_s: args.visibility.clone(),
         conditions: args.detector.clone(),
-        mpjpe: true,
+        mpjpe: !args.static_cameras,
+        static_cameras: args.static_cameras,
     };
     let started = std::time::Instant::now();
     let mut clock = move || started.elapsed().as_secs_f64() * 1e3;

@@ -15,6 +15,9 @@ mod cmd;
 mod e2e;
 #[cfg(test)]
 mod layers;
+// The module-circle check runs as a test (`cargo test -p xtask`, part of `cargo xtask test`).
+#[cfg(test)]
+mod modules;
 mod serve;
 mod test;
 mod tools;

@@ -20,9 +20,9 @@ use egoexo_core::rotation::{COLLAPSED_6D_STRENGTH, Rot6d, interpolate_collapsed_
 use egoexo_core::skeleton::SmplPose;
 
 use crate::InferError;
-use crate::engine::{Method, ObserverGates, Reconstruction};
 use crate::inputs::{POSE_DIM, decode_pose};
 use crate::passes::WindowOutput;
+use crate::reconstruction::{Method, ObserverGates, Reconstruction};
 use crate::windows::crossfade_weight;
 
 /// A window-frame 6D row whose root block cannot be read (never produced by the networks).

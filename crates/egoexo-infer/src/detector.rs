@@ -13,39 +13,10 @@ use egoexo_core::glam::Vec2;
 use serde::{Deserialize, Serialize};
 
 use crate::InferError;
-use crate::manifest::{ModelFile, sha256_hex};
+use crate::manifest::sha256_hex;
 use crate::models::OnnxModel;
 
-/// The `detector` entry of the manifest.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct DetectorManifest {
-    /// Which model (`movenet-lightning`, `movenet-thunder`).
-    pub model: String,
-    /// The keypoint set of its output; only `coco17` is read.
-    pub keypoints: String,
-    /// Where the weights come from and under which licence.
-    pub licence: String,
-    pub source: String,
-    /// The ONNX file: input `[1, S, S, 3]` RGB in 0..=255 (float32), output `[1, 1, 17, 3]` as
-    /// (y, x, score), y and x in [0, 1] of the input square.
-    pub file: ModelFile,
-}
-
-impl DetectorManifest {
-    /// The model's square input side S, pixels; checks the file's declared shapes.
-    pub fn input_size(&self) -> Result<u32, InferError> {
-        let bad = |what: String| InferError::Manifest(format!("manifest.json: detector `{}`: {what}", self.file.file));
-        if self.keypoints != "coco17" {
-            return Err(bad(format!("keypoints `{}`, expected `coco17`", self.keypoints)));
-        }
-        let [input] = &self.file.inputs[..] else { return Err(bad("expected one input".into())) };
-        let [output] = &self.file.outputs[..] else { return Err(bad("expected one output".into())) };
-        match (&input.shape[..], &output.shape[..]) {
-            ([1, h, w, 3], [1, 1, COCO17_COUNT, 3]) if h == w && (32..=1024).contains(h) => Ok(*h as u32),
-            (i, o) => Err(bad(format!("shapes {i:?} → {o:?}, expected [1, S, S, 3] → [1, 1, 17, 3]"))),
-        }
-    }
-}
+pub use crate::manifest::DetectorManifest;
 
 /// One keypoint of a detection: where in the crop (normalised, x right, y down, `[0, 1]`
 /// across the window) and the model's confidence in `[0, 1]`.

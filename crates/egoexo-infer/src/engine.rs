@@ -1,6 +1,9 @@
-//! The reconstruction engine: an aligned session in, SMPL motion out.
+//! The reconstruction engine: the trained networks per tracking mode and the baselines' data
+//! ([`Engine`]), and every model set of a manifest loaded once ([`LoadedModels`]). Running it
+//! is the job's ([`crate::job`]: `Engine::start`, `Engine::reconstruct`), so this module sits
+//! below the job and the job below nothing that imports it back.
 //!
-//! [`Engine::reconstruct`] is a [`ReconstructionJob`] run to the end:
+//! [`Engine::reconstruct`] is a [`ReconstructionJob`](crate::job::ReconstructionJob) run to the end:
 //! [plan](crate::plan) (tracking mode, tracked spans, windows, observer slots) → per window,
 //! the [ego pass](crate::passes::ego_pass) (ego features, EgoNet's coarse pose) → per window
 //! and method, the [exo pass](crate::passes::exo_pass) (regions, canonical rays, gate) and the
@@ -11,206 +14,16 @@
 //! baselines (`rest-pose`, `nearest-neighbour`), natively and in the browser's worker. Units:
 //! metres, seconds; world Y-up.
 
-use egoexo_core::foot_contact::FootLift;
 use std::collections::BTreeMap;
-use std::fmt;
 
-use egoexo_core::aligned::AlignedSession;
 use egoexo_core::ego_features::TrackingMode;
-use egoexo_core::exo_keypoints::EXO_KEYPOINT_COUNT;
-use egoexo_core::glam::Vec3;
-use egoexo_core::motion::SmplMotion;
-use egoexo_core::skeleton::NUM_JOINTS;
-use serde::{Deserialize, Serialize};
 
 use crate::InferError;
 use crate::baselines::NearestNeighbourIndex;
-use crate::job::ReconstructionJob;
-use crate::models::{ModelSet, NetworkRuns};
-use crate::passes::{CoarsePoseSource, ExoMode};
-use crate::plan::WindowOptions;
-use crate::windows::WINDOW;
-
-/// How to reconstruct.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Method {
-    /// Baseline: SMPL rest pose hung from the head, facing the head's heading.
-    RestPose,
-    /// Baseline: per-frame nearest neighbour over training ego features.
-    NearestNeighbour,
-    /// EgoNet's coarse pose alone (the paper's first stage; what the region proposal and the
-    /// detector step project into the observers' images).
-    EgoNet,
-    /// The fusion network with every observer masked out.
-    EgoOnly,
-    /// The full method: gated exo rays fused with the ego stream.
-    EgoExo,
-    /// The fusion network with every valid ray's gate forced to 1 (ablation).
-    EgoExoUngated,
-}
-
-impl Method {
-    /// The name used in tables and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::RestPose => "rest-pose",
-            Method::NearestNeighbour => "nearest-neighbour",
-            Method::EgoNet => "egonet",
-            Method::EgoOnly => "ego-only",
-            Method::EgoExo => "ego-exo",
-            Method::EgoExoUngated => "ego-exo-ungated",
-        }
-    }
-
-    /// Whether the method runs the ONNX networks.
-    pub fn uses_networks(self) -> bool {
-        matches!(self, Method::EgoNet | Method::EgoOnly | Method::EgoExo | Method::EgoExoUngated)
-    }
-
-    /// How the method treats the observers' rays (`None` for the baselines and EgoNet alone,
-    /// which run no exo pass).
-    pub fn exo_mode(self) -> Option<ExoMode> {
-        match self {
-            Method::RestPose | Method::NearestNeighbour | Method::EgoNet => None,
-            Method::EgoOnly => Some(ExoMode::Masked),
-            Method::EgoExo => Some(ExoMode::Gated),
-            Method::EgoExoUngated => Some(ExoMode::Ungated),
-        }
-    }
-
-    /// Where the method's coarse pose comes from; methods with the same one can share an
-    /// ego pass.
-    pub fn coarse_pose(self) -> CoarsePose {
-        match self {
-            Method::RestPose => CoarsePose::RestPose,
-            Method::NearestNeighbour => CoarsePose::NearestNeighbour,
-            Method::EgoNet | Method::EgoOnly | Method::EgoExo | Method::EgoExoUngated => CoarsePose::EgoNet,
-        }
-    }
-}
-
-/// The coarse-pose source of a method, without the model or index behind it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum CoarsePose {
-    RestPose,
-    NearestNeighbour,
-    EgoNet,
-}
-
-impl fmt::Display for Method {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-/// Options of one reconstruction.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ReconstructOptions {
-    pub method: Method,
-    /// Tracking mode; `None` takes what the wearer's devices allow
-    /// ([`AlignedSession::tracking_mode`]).
-    pub tracking: Option<TrackingMode>,
-    /// Frames between window starts (overlapping windows are cross-faded).
-    pub stride: usize,
-    /// The paper's evaluation protocol: non-overlapping 96-frame segments, no cross-fade.
-    pub non_overlapping: bool,
-    /// Keep the feet out of the floor when the session knows its floor
-    /// ([`AlignedSession::floor_y`]): legs whose feet the networks put through it are folded
-    /// onto it ([`egoexo_core::foot_contact::lift_feet_above_floor`]).
-    pub floor_contact: bool,
-}
-
-impl Default for ReconstructOptions {
-    fn default() -> Self {
-        Self { method: Method::EgoExo, tracking: None, stride: WINDOW / 2, non_overlapping: false, floor_contact: true }
-    }
-}
-
-impl ReconstructOptions {
-    /// How the timeline is cut into windows.
-    pub fn windows(&self) -> WindowOptions {
-        WindowOptions { stride: self.stride, non_overlapping: self.non_overlapping }
-    }
-}
-
-/// Which pass a progress report is about.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Stage {
-    /// The ego pass: ego features and the coarse pose (EgoNet or a baseline), per window.
-    Ego,
-    /// The exo and fusion passes of one method (or, for a baseline, decoding its coarse
-    /// pose), per window.
-    Fusion(Method),
-}
-
-/// A progress report: `done` of `total` windows of a stage.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Progress {
-    pub stage: Stage,
-    pub done: usize,
-    pub total: usize,
-}
-
-/// Gate values of one observer: per frame, per exo keypoint (0 where no valid ray).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ObserverGates {
-    pub observer_id: String,
-    pub gates: Vec<[f32; EXO_KEYPOINT_COUNT]>,
-}
-
-/// A reconstruction on the aligned session's timeline.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Reconstruction {
-    pub method: Method,
-    pub tracking: TrackingMode,
-    /// Per-frame SMPL parameters (frames without valid tracking hold the nearest valid pose).
-    pub motion: SmplMotion,
-    /// World positions of the 24 joints per frame (metres).
-    pub joints: Vec<[Vec3; NUM_JOINTS]>,
-    /// Frames that were actually reconstructed (wearer tracking valid).
-    pub valid: Vec<bool>,
-    /// Frames where at least one observer contributed a ray with gate ≥ 0.5.
-    pub exo_evidence: Vec<bool>,
-    /// Per observer (session order), per frame, per keypoint gate values.
-    pub gates: Vec<ObserverGates>,
-    /// What the floor constraint did (`None`: not applied — no floor, or turned off).
-    #[serde(default)]
-    pub feet_lifted: Option<FootLift>,
-}
-
-impl Reconstruction {
-    /// The reconstruction of frames `range` only (clamped), e.g. the one frame a live view
-    /// shows out of its window; the motion's `start_ns` moves with its first frame.
-    pub fn frames_slice(&self, range: std::ops::Range<usize>) -> Reconstruction {
-        let start = range.start.min(self.joints.len());
-        let end = range.end.clamp(start, self.joints.len());
-        let slice = |len: usize| start.min(len)..end.min(len);
-        let offset_ns = (start as f64 * 1e9 / f64::from(self.motion.fps)).round() as i64;
-        Reconstruction {
-            method: self.method,
-            tracking: self.tracking,
-            motion: SmplMotion {
-                start_ns: self.motion.start_ns.saturating_add(offset_ns),
-                poses: self.motion.poses[slice(self.motion.poses.len())].to_vec(),
-                ..self.motion.clone()
-            },
-            joints: self.joints[start..end].to_vec(),
-            feet_lifted: self.feet_lifted,
-            valid: self.valid[slice(self.valid.len())].to_vec(),
-            exo_evidence: self.exo_evidence[slice(self.exo_evidence.len())].to_vec(),
-            gates: self
-                .gates
-                .iter()
-                .map(|g| ObserverGates {
-                    observer_id: g.observer_id.clone(),
-                    gates: g.gates[slice(g.gates.len())].to_vec(),
-                })
-                .collect(),
-        }
-    }
-}
+use crate::manifest::Manifest;
+use crate::models::{Loading, ModelSet, NetworkRuns};
+use crate::passes::CoarsePoseSource;
+use crate::reconstruction::CoarsePose;
 
 /// The engine: the trained networks (per tracking mode) and the baselines' data.
 #[derive(Clone, Debug, Default)]
@@ -275,98 +88,66 @@ impl Engine {
     pub fn network_runs(&self) -> NetworkRuns {
         self.models.values().map(ModelSet::runs).fold(NetworkRuns::default(), |a, b| a + b)
     }
-
-    /// Starts a reconstruction of `aligned` with every method of `methods`, sharing one ego
-    /// pass (so the methods must share a coarse-pose source). `options.method` is ignored;
-    /// step the job with [`ReconstructionJob::step`].
-    pub fn start(
-        &self,
-        aligned: &AlignedSession,
-        options: &ReconstructOptions,
-        methods: &[Method],
-    ) -> Result<ReconstructionJob, InferError> {
-        ReconstructionJob::new(self, aligned, options, methods)
-    }
-
-    /// Reconstructs the wearer's motion. `progress` is called after every window of every
-    /// pass; returning `false` cancels (the result is then [`InferError::Cancelled`]).
-    pub fn reconstruct(
-        &self,
-        aligned: &AlignedSession,
-        options: &ReconstructOptions,
-        progress: &mut dyn FnMut(Progress) -> bool,
-    ) -> Result<Reconstruction, InferError> {
-        let mut all = self.reconstruct_each(aligned, options, &[options.method], progress)?;
-        all.pop().ok_or(InferError::Window("no reconstruction".into()))
-    }
-
-    /// Reconstructs with every method of `methods`, results in that order. Methods that share
-    /// a coarse-pose source share one job and so one ego pass (ego-exo, its ungated ablation
-    /// and the ego-only overlay run EgoNet once per window between them); the jobs run in
-    /// the order of their first method.
-    pub fn reconstruct_each(
-        &self,
-        aligned: &AlignedSession,
-        options: &ReconstructOptions,
-        methods: &[Method],
-        progress: &mut dyn FnMut(Progress) -> bool,
-    ) -> Result<Vec<Reconstruction>, InferError> {
-        self.run_jobs(aligned, options, methods, &mut |engine, job| {
-            while let Some(p) = job.step(engine, aligned)? {
-                if !progress(p) {
-                    return Err(InferError::Cancelled);
-                }
-            }
-            Ok(())
-        })
-    }
-
-    /// [`Engine::reconstruct_each`] with each job's windows spread over the current rayon
-    /// pool ([`ReconstructionJob::run_in_parallel`]); the same results.
-    #[cfg(feature = "parallel")]
-    pub fn reconstruct_each_in_parallel(
-        &self,
-        aligned: &AlignedSession,
-        options: &ReconstructOptions,
-        methods: &[Method],
-        progress: &mut dyn FnMut(Progress) -> bool,
-    ) -> Result<Vec<Reconstruction>, InferError> {
-        self.run_jobs(aligned, options, methods, &mut |engine, job| {
-            job.run_in_parallel(engine, aligned, crate::job::WINDOW_CHUNK, progress)
-        })
-    }
-
-    /// One job per group of methods sharing a coarse-pose source (groups in the order of
-    /// their first method), each run to the end by `run`; results in the order of `methods`.
-    fn run_jobs(
-        &self,
-        aligned: &AlignedSession,
-        options: &ReconstructOptions,
-        methods: &[Method],
-        run: &mut dyn FnMut(&Engine, &mut ReconstructionJob) -> Result<(), InferError>,
-    ) -> Result<Vec<Reconstruction>, InferError> {
-        let mut results: Vec<Option<Reconstruction>> = vec![None; methods.len()];
-        for members in coarse_pose_groups(methods) {
-            let group: Vec<Method> = members.iter().map(|&i| methods[i]).collect();
-            let mut job = self.start(aligned, options, &group)?;
-            run(self, &mut job)?;
-            for (i, r) in members.into_iter().zip(job.finish(aligned)?) {
-                results[i] = Some(r);
-            }
-        }
-        results.into_iter().map(|r| r.ok_or(InferError::Methods("no method to run".into()))).collect()
-    }
 }
 
-/// Indices of `methods` grouped by coarse-pose source (one job each), groups in the order of
-/// their first method.
-fn coarse_pose_groups(methods: &[Method]) -> Vec<Vec<usize>> {
-    let mut groups: Vec<(CoarsePose, Vec<usize>)> = Vec::new();
-    for (i, method) in methods.iter().enumerate() {
-        match groups.iter_mut().find(|(coarse, _)| *coarse == method.coarse_pose()) {
-            Some((_, members)) => members.push(i),
-            None => groups.push((method.coarse_pose(), vec![i])),
-        }
+/// Every model set of a manifest, each file parsed once: an engine with the offline networks
+/// (what recordings use) and, per lookahead that live variants were trained for, an engine
+/// with those variants (and the offline networks of modes without one).
+#[derive(Clone, Debug, Default)]
+pub struct LoadedModels {
+    offline: Engine,
+    live: BTreeMap<usize, Engine>,
+}
+
+impl LoadedModels {
+    /// Loads every set of `manifest`, reading each file through `read` (a path relative to the
+    /// models folder → bytes) once and checking its sha256.
+    pub fn load(
+        manifest: &Manifest,
+        read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
+    ) -> Result<Self, InferError> {
+        Self::load_with(manifest, read, Loading::Now)
     }
-    groups.into_iter().map(|(_, members)| members).collect()
+
+    /// [`Self::load`], parsing and optimising the networks now or on first use.
+    pub fn load_with(
+        manifest: &Manifest,
+        mut read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
+        loading: Loading,
+    ) -> Result<Self, InferError> {
+        let mut loaded = Vec::new();
+        let mut offline_sets = Vec::new();
+        let mut live_sets: BTreeMap<usize, Vec<ModelSet>> = BTreeMap::new();
+        for set in &manifest.model_sets {
+            let models = ModelSet::load_sharing(set, &mut read, &mut loaded, loading)?;
+            match set.lookahead {
+                None => offline_sets.push(models),
+                Some(lookahead) => live_sets.entry(lookahead).or_default().push(models),
+            }
+        }
+        let offline = offline_sets.iter().cloned().fold(Engine::new(), Engine::with_models);
+        let live = live_sets
+            .into_iter()
+            .map(|(lookahead, sets)| (lookahead, sets.into_iter().fold(offline.clone(), Engine::with_models)))
+            .collect();
+        Ok(Self { offline, live })
+    }
+
+    /// The offline networks.
+    pub fn offline(&self) -> &Engine {
+        &self.offline
+    }
+
+    /// The networks to read windows out at `lookahead` frames before their newest frame: the
+    /// live variants trained for it where shipped, the offline networks otherwise (per mode;
+    /// [`Engine::trained_for_lookahead`] tells which).
+    pub fn for_lookahead(&self, lookahead: usize) -> &Engine {
+        self.live.get(&lookahead).unwrap_or(&self.offline)
+    }
+
+    /// How often the offline networks have run since loading. The EgoNet they share with live
+    /// variants counts every run; the variants' own gates and fusion networks are not counted.
+    pub fn network_runs(&self) -> NetworkRuns {
+        self.offline.network_runs()
+    }
 }

@@ -28,11 +28,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::InferError;
 use crate::decode::{MotionAssembler, assemble_reconstruction};
-use crate::engine::{CoarsePose, Engine, Method, Progress, ReconstructOptions, Reconstruction, Stage};
+use crate::engine::Engine;
 use crate::inputs::POSE_DIM;
 use crate::models::NetworkRuns;
 use crate::passes::{EgoPassOutput, WindowOutput, ego_pass, observer_fusion_pass};
 use crate::plan::{ReconstructionPlan, resolve_tracking};
+use crate::reconstruction::{CoarsePose, Method, Progress, ReconstructOptions, Reconstruction, Stage};
 use crate::timing::{Clock, StageTimer, StageTimings, TimedStage};
 
 /// Windows per chunk of a job (sequential steps and [`ReconstructionJob::run_in_parallel`]):
@@ -486,4 +487,101 @@ fn method_window(
         None => Ok(WindowOutput::from_coarse(ego)),
         Some(mode) => observer_fusion_pass(aligned, engine.require_models(tracking)?, ego, observers, mode, timer),
     }
+}
+
+/// Running the engine: a job per group of methods sharing a coarse-pose source.
+impl Engine {
+    /// Starts a reconstruction of `aligned` with every method of `methods`, sharing one ego
+    /// pass (so the methods must share a coarse-pose source). `options.method` is ignored;
+    /// step the job with [`ReconstructionJob::step`].
+    pub fn start(
+        &self,
+        aligned: &AlignedSession,
+        options: &ReconstructOptions,
+        methods: &[Method],
+    ) -> Result<ReconstructionJob, InferError> {
+        ReconstructionJob::new(self, aligned, options, methods)
+    }
+
+    /// Reconstructs the wearer's motion. `progress` is called after every window of every
+    /// pass; returning `false` cancels (the result is then [`InferError::Cancelled`]).
+    pub fn reconstruct(
+        &self,
+        aligned: &AlignedSession,
+        options: &ReconstructOptions,
+        progress: &mut dyn FnMut(Progress) -> bool,
+    ) -> Result<Reconstruction, InferError> {
+        let mut all = self.reconstruct_each(aligned, options, &[options.method], progress)?;
+        all.pop().ok_or(InferError::Window("no reconstruction".into()))
+    }
+
+    /// Reconstructs with every method of `methods`, results in that order. Methods that share
+    /// a coarse-pose source share one job and so one ego pass (ego-exo, its ungated ablation
+    /// and the ego-only overlay run EgoNet once per window between them); the jobs run in
+    /// the order of their first method.
+    pub fn reconstruct_each(
+        &self,
+        aligned: &AlignedSession,
+        options: &ReconstructOptions,
+        methods: &[Method],
+        progress: &mut dyn FnMut(Progress) -> bool,
+    ) -> Result<Vec<Reconstruction>, InferError> {
+        self.run_jobs(aligned, options, methods, &mut |engine, job| {
+            while let Some(p) = job.step(engine, aligned)? {
+                if !progress(p) {
+                    return Err(InferError::Cancelled);
+                }
+            }
+            Ok(())
+        })
+    }
+
+    /// [`Engine::reconstruct_each`] with each job's windows spread over the current rayon
+    /// pool ([`ReconstructionJob::run_in_parallel`]); the same results.
+    #[cfg(feature = "parallel")]
+    pub fn reconstruct_each_in_parallel(
+        &self,
+        aligned: &AlignedSession,
+        options: &ReconstructOptions,
+        methods: &[Method],
+        progress: &mut dyn FnMut(Progress) -> bool,
+    ) -> Result<Vec<Reconstruction>, InferError> {
+        self.run_jobs(aligned, options, methods, &mut |engine, job| {
+            job.run_in_parallel(engine, aligned, crate::job::WINDOW_CHUNK, progress)
+        })
+    }
+
+    /// One job per group of methods sharing a coarse-pose source (groups in the order of
+    /// their first method), each run to the end by `run`; results in the order of `methods`.
+    fn run_jobs(
+        &self,
+        aligned: &AlignedSession,
+        options: &ReconstructOptions,
+        methods: &[Method],
+        run: &mut dyn FnMut(&Engine, &mut ReconstructionJob) -> Result<(), InferError>,
+    ) -> Result<Vec<Reconstruction>, InferError> {
+        let mut results: Vec<Option<Reconstruction>> = vec![None; methods.len()];
+        for members in coarse_pose_groups(methods) {
+            let group: Vec<Method> = members.iter().map(|&i| methods[i]).collect();
+            let mut job = self.start(aligned, options, &group)?;
+            run(self, &mut job)?;
+            for (i, r) in members.into_iter().zip(job.finish(aligned)?) {
+                results[i] = Some(r);
+            }
+        }
+        results.into_iter().map(|r| r.ok_or(InferError::Methods("no method to run".into()))).collect()
+    }
+}
+
+/// Indices of `methods` grouped by coarse-pose source (one job each), groups in the order of
+/// their first method.
+fn coarse_pose_groups(methods: &[Method]) -> Vec<Vec<usize>> {
+    let mut groups: Vec<(CoarsePose, Vec<usize>)> = Vec::new();
+    for (i, method) in methods.iter().enumerate() {
+        match groups.iter_mut().find(|(coarse, _)| *coarse == method.coarse_pose()) {
+            Some((_, members)) => members.push(i),
+            None => groups.push((method.coarse_pose(), vec![i])),
+        }
+    }
+    groups.into_iter().map(|(_, members)| members).collect()
 }

@@ -1,8 +1,15 @@
 //! The egoexo reconstruction engine: an [`AlignedSession`](egoexo_core::aligned::AlignedSession)
 //! in, SMPL motion out, in named passes.
 //!
-//! - [`engine`] — [`Engine`] (the loaded networks and baselines), [`Method`],
-//!   [`Engine::reconstruct`], and the [`Reconstruction`] it returns.
+//! Modules bottom up, each importing only modules listed before it (no circle: checked by
+//! `cargo xtask test`, `xtask/src/modules.rs`): `windows`, `timing`, `plan`, `inputs`,
+//! `manifest`, `models`, `detector`, `baselines`, `passes`, `reconstruction`, `decode`,
+//! `engine`, `job`, `coarse`, `cost`.
+//!
+//! - [`reconstruction`] — what a reconstruction is: [`Method`], [`ReconstructOptions`],
+//!   [`Progress`], and the [`Reconstruction`] it returns.
+//! - [`engine`] — [`Engine`] (the loaded networks and baselines) and [`LoadedModels`];
+//!   [`job`] runs it ([`Engine::reconstruct`]).
 //! - [`plan`] — the tracking mode (decided once, [`plan::resolve_tracking`]), tracked spans,
 //!   windows and observer slots of a reconstruction.
 //! - [`passes`] — one window at a time: the ego pass (ego features → EgoNet's coarse pose),
@@ -15,8 +22,8 @@
 //! - [`windows`] — valid spans, 96-frame windows, cross-fade weights.
 //! - [`inputs`] — the networks' input tensors (shared with the training shards): ego
 //!   features, coarse poses, rays, gate features, masks, targets.
-//! - [`models`] — ONNX models loaded from bytes and run by tract, [`LoadedModels`] (the
-//!   offline networks and the live variants per lookahead); [`manifest`] — `models/manifest.json`.
+//! - [`models`] — ONNX models loaded from bytes and run by tract; [`manifest`] —
+//!   `models/manifest.json` (the detector's entry included).
 //! - [`baselines`] — rest pose and nearest neighbour.
 //! - [`coarse`] — EgoNet's coarse body on a few chosen windows (for steps before the
 //!   reconstruction, such as registering observers).
@@ -38,14 +45,16 @@ pub mod manifest;
 pub mod models;
 pub mod passes;
 pub mod plan;
+pub mod reconstruction;
 pub mod timing;
 pub mod windows;
 
 pub use coarse::CoarseBody;
 pub use detector::{CropKeypoint, DetectorManifest, KeypointDetector};
-pub use engine::{Engine, Method, ObserverGates, Progress, ReconstructOptions, Reconstruction, Stage};
+pub use engine::{Engine, LoadedModels};
 pub use job::{ChunkOutputs, ReconstructionJob};
-pub use models::{LoadedModels, NetworkRuns};
+pub use models::NetworkRuns;
+pub use reconstruction::{Method, ObserverGates, Progress, ReconstructOptions, Reconstruction, Stage};
 pub use timing::{Clock, StageTimer, StageTimings, TimedStage};
 
 use thiserror::Error;

@@ -5,6 +5,7 @@
 //! so a stale model can never silently receive the wrong inputs.
 
 use egoexo_core::ego_features::{EGO_FEATURE_DIM, EGO_FEATURE_LAYOUT_VERSION, EgoFeatureLayout, TrackingMode};
+use egoexo_core::exo_keypoints::COCO17_COUNT;
 use egoexo_core::gate_features::{GATE_FEATURE_LAYOUT_VERSION, GateFeatureLayout};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -119,7 +120,7 @@ pub struct Manifest {
     /// The 2D keypoint detector for observers that bring video instead of keypoints; not one
     /// of [`Manifest::files`] (loaded only when a session needs it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub detector: Option<crate::detector::DetectorManifest>,
+    pub detector: Option<DetectorManifest>,
     /// Free-form provenance: training data, subjects, command, commit, date, timings.
     #[serde(default)]
     pub training: serde_json::Value,
@@ -241,4 +242,35 @@ impl Manifest {
 /// Lowercase hex sha256.
 pub fn sha256_hex(bytes: &[u8]) -> String {
     Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// The `detector` entry of the manifest.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DetectorManifest {
+    /// Which model (`movenet-lightning`, `movenet-thunder`).
+    pub model: String,
+    /// The keypoint set of its output; only `coco17` is read.
+    pub keypoints: String,
+    /// Where the weights come from and under which licence.
+    pub licence: String,
+    pub source: String,
+    /// The ONNX file: input `[1, S, S, 3]` RGB in 0..=255 (float32), output `[1, 1, 17, 3]` as
+    /// (y, x, score), y and x in [0, 1] of the input square.
+    pub file: ModelFile,
+}
+
+impl DetectorManifest {
+    /// The model's square input side S, pixels; checks the file's declared shapes.
+    pub fn input_size(&self) -> Result<u32, InferError> {
+        let bad = |what: String| InferError::Manifest(format!("manifest.json: detector `{}`: {what}", self.file.file));
+        if self.keypoints != "coco17" {
+            return Err(bad(format!("keypoints `{}`, expected `coco17`", self.keypoints)));
+        }
+        let [input] = &self.file.inputs[..] else { return Err(bad("expected one input".into())) };
+        let [output] = &self.file.outputs[..] else { return Err(bad("expected one output".into())) };
+        match (&input.shape[..], &output.shape[..]) {
+            ([1, h, w, 3], [1, 1, COCO17_COUNT, 3]) if h == w && (32..=1024).contains(h) => Ok(*h as u32),
+            (i, o) => Err(bad(format!("shapes {i:?} → {o:?}, expected [1, S, S, 3] → [1, 1, 17, 3]"))),
+        }
+    }
 }

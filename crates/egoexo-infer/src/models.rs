@@ -2,7 +2,6 @@
 //! compiled into the binary), checked against the manifest, optimised once for their fixed
 //! input shapes, and reused for every window.
 
-use std::collections::BTreeMap;
 use std::io::Cursor;
 use std::ops::{Add, Sub};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -12,8 +11,7 @@ use serde::{Deserialize, Serialize};
 use tract_onnx::prelude::*;
 
 use crate::InferError;
-use crate::engine::Engine;
-use crate::manifest::{Manifest, ModelFile, ModelSetManifest, sha256_hex};
+use crate::manifest::{ModelFile, ModelSetManifest, sha256_hex};
 
 /// One optimised ONNX graph with fixed input shapes. Clones share the graph and the run
 /// counter. A model loaded with [`OnnxModel::load_deferred`] keeps its (checked) bytes and is
@@ -218,7 +216,7 @@ impl ModelSet {
 
     /// [`ModelSet::load`] reusing the models already in `loaded` (by file and sha256) and
     /// adding the ones it loads.
-    fn load_sharing(
+    pub(crate) fn load_sharing(
         manifest: &ModelSetManifest,
         read: &mut dyn FnMut(&str) -> Result<Vec<u8>, InferError>,
         loaded: &mut Vec<(ModelFile, OnnxModel)>,
@@ -255,15 +253,6 @@ impl ModelSet {
     }
 }
 
-/// Every model set of a manifest, each file parsed once: an engine with the offline networks
-/// (what recordings use) and, per lookahead that live variants were trained for, an engine
-/// with those variants (and the offline networks of modes without one).
-#[derive(Clone, Debug, Default)]
-pub struct LoadedModels {
-    offline: Engine,
-    live: BTreeMap<usize, Engine>,
-}
-
 /// When a network is parsed and optimised: as it is loaded, or on its first use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Loading {
@@ -271,57 +260,4 @@ pub enum Loading {
     /// [`OnnxModel::load_deferred`]: the files are read and checked now, each network is
     /// parsed and optimised on its first run or [`ModelSet::prepare`].
     Deferred,
-}
-
-impl LoadedModels {
-    /// Loads every set of `manifest`, reading each file through `read` (a path relative to the
-    /// models folder → bytes) once and checking its sha256.
-    pub fn load(
-        manifest: &Manifest,
-        read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
-    ) -> Result<Self, InferError> {
-        Self::load_with(manifest, read, Loading::Now)
-    }
-
-    /// [`Self::load`], parsing and optimising the networks now or on first use.
-    pub fn load_with(
-        manifest: &Manifest,
-        mut read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
-        loading: Loading,
-    ) -> Result<Self, InferError> {
-        let mut loaded = Vec::new();
-        let mut offline_sets = Vec::new();
-        let mut live_sets: BTreeMap<usize, Vec<ModelSet>> = BTreeMap::new();
-        for set in &manifest.model_sets {
-            let models = ModelSet::load_sharing(set, &mut read, &mut loaded, loading)?;
-            match set.lookahead {
-                None => offline_sets.push(models),
-                Some(lookahead) => live_sets.entry(lookahead).or_default().push(models),
-            }
-        }
-        let offline = offline_sets.iter().cloned().fold(Engine::new(), Engine::with_models);
-        let live = live_sets
-            .into_iter()
-            .map(|(lookahead, sets)| (lookahead, sets.into_iter().fold(offline.clone(), Engine::with_models)))
-            .collect();
-        Ok(Self { offline, live })
-    }
-
-    /// The offline networks.
-    pub fn offline(&self) -> &Engine {
-        &self.offline
-    }
-
-    /// The networks to read windows out at `lookahead` frames before their newest frame: the
-    /// live variants trained for it where shipped, the offline networks otherwise (per mode;
-    /// [`Engine::trained_for_lookahead`] tells which).
-    pub fn for_lookahead(&self, lookahead: usize) -> &Engine {
-        self.live.get(&lookahead).unwrap_or(&self.offline)
-    }
-
-    /// How often the offline networks have run since loading. The EgoNet they share with live
-    /// variants counts every run; the variants' own gates and fusion networks are not counted.
-    pub fn network_runs(&self) -> NetworkRuns {
-        self.offline.network_runs()
-    }
 }

@@ -21,8 +21,7 @@ pub const LIBRARY_FPS: f32 = 30.0;
 pub const CMU_SOURCE: &str = "The data used in this project was obtained from mocap.cs.cmu.edu. \
      The database was created with funding from NSF EIA-0196217.";
 
-/// [`ClipInfo::source_format`] of clips imported from ASF/AMC.
-pub const ASF_AMC_FORMAT: &str = "ASF/AMC";
+pub use crate::library::ASF_AMC_FORMAT;
 
 /// Settings of an import.
 #[derive(Clone, Debug, PartialEq)]

@@ -92,8 +92,12 @@ pub struct ClipInfo {
     pub retarget: RetargetStats,
 }
 
+/// [`ClipInfo::source_format`] of clips imported from ASF/AMC (libraries written before the
+/// field existed hold only such clips).
+pub const ASF_AMC_FORMAT: &str = "ASF/AMC";
+
 fn asf_amc_format() -> String {
-    crate::import::ASF_AMC_FORMAT.to_owned()
+    ASF_AMC_FORMAT.to_owned()
 }
 
 impl ClipInfo {

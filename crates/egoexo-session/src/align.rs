@@ -266,7 +266,7 @@ pub fn align_on_timeline(
         head_joint_in_device: session.wearer.head_joint_in_device,
         ground_truth,
         coverage,
-        floor_y: session.floor_or_estimate().map(|f| f.height_m),
+        floor_y: crate::floor::floor_or_estimate(session).map(|f| f.height_m),
     })
 }
 

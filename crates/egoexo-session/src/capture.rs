@@ -18,6 +18,7 @@
 use egoexo_core::camera::CameraCalibration;
 use egoexo_core::exo_keypoints::{COCO17_COUNT, Keypoint2d};
 use egoexo_core::glam::Vec3;
+use egoexo_core::rigid::RigidTransform;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -25,7 +26,7 @@ use crate::model::{
     ContextFeatureTrack, Floor, GroundTruth, KeypointTrack, Observer, Session, SubjectInfo, Trajectory, VideoRef,
     Wearer, WristSource,
 };
-use crate::placement::{ClockRef, Placement, WorldRef};
+use crate::placement::{ClockRef, Mount, Placement, WorldRef};
 
 /// The participant id a one-wearer session's wearer gets in a capture.
 pub const WEARER_ID: &str = "wearer";
@@ -319,6 +320,45 @@ fn placement_seen_from(wearer: &Placement, observer: &Placement) -> Placement {
         seen.clock = ClockRef::Own;
     }
     seen
+}
+
+/// Spans every static camera's one pose over the recording: its trajectory becomes that pose
+/// at the first and the last time of the wearer's head and the camera's keypoints (what
+/// alignment interpolates over). Readers call it once the whole session is read.
+pub fn spread_fixed_poses(session: &mut Session) {
+    let head = session.wearer.head.time_range_ns();
+    for observer in session.observers.iter_mut().filter(|o| o.placement.mount == Mount::Fixed) {
+        let keypoints =
+            observer.keypoints.as_ref().and_then(|k| Some((*k.timestamps_ns.first()?, *k.timestamps_ns.last()?)));
+        spread(&mut observer.head, [head, keypoints]);
+    }
+}
+
+/// [`spread_fixed_poses`] for a capture: over every worn device's trajectory and every view.
+pub fn spread_fixed_poses_in_capture(capture: &mut Capture) {
+    let mut ranges: Vec<Option<(i64, i64)>> = capture
+        .participants
+        .iter()
+        .filter(|p| p.placement.mount == Mount::Worn)
+        .map(|p| p.head.time_range_ns())
+        .collect();
+    for view in &capture.views {
+        let times = match &view.people {
+            ViewPeople::Assigned { keypoints, .. } => &keypoints.timestamps_ns,
+            ViewPeople::Unassigned(people) => &people.timestamps_ns,
+        };
+        ranges.push(times.first().zip(times.last()).map(|(a, b)| (*a, *b)));
+    }
+    for p in capture.participants.iter_mut().filter(|p| p.placement.mount == Mount::Fixed) {
+        spread(&mut p.head, ranges.iter().copied());
+    }
+}
+
+fn spread(trajectory: &mut Trajectory, ranges: impl IntoIterator<Item = Option<(i64, i64)>>) {
+    let pose = trajectory.poses.first().copied().unwrap_or(RigidTransform::IDENTITY);
+    let (start, end) = ranges.into_iter().flatten().fold((i64::MAX, i64::MIN), |(a, b), (s, e)| (a.min(s), b.max(e)));
+    let (start, end) = if start > end { (0, 1) } else { (start, end.max(start.saturating_add(1))) };
+    *trajectory = Trajectory { timestamps_ns: vec![start, end], poses: vec![pose; 2] };
 }
 
 #[cfg(test)]

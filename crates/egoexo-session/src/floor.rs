@@ -15,7 +15,6 @@
 //! at the mean shape, as the simulator places them) and the head joint → glasses offset.
 
 use egoexo_core::skeleton::SmplSkeleton;
-use serde::{Deserialize, Serialize};
 
 use crate::model::{Session, Trajectory};
 
@@ -33,42 +32,7 @@ pub use egoexo_core::foot_contact::{FOOT_JOINT_ABOVE_SOLE_M, FOOT_JOINTS};
 /// Percentile of the head's heights taken as its standing height.
 pub const STANDING_PERCENTILE: f32 = 0.95;
 
-/// Where the floor is.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Floor {
-    /// Height of the floor plane, metres (session world Y).
-    pub height_m: f32,
-    pub source: FloorSource,
-}
-
-/// How the floor height was found.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-pub enum FloorSource {
-    /// MPS semidense points: `points` well-constrained points in the floor's band.
-    SemidensePoints { file: String, points: u64 },
-    /// The standing head height minus the glasses' height above the soles for `stature_m`
-    /// (`stature_known`: from the subject info, else the mean shape's).
-    StandingHead { standing_head_m: f32, stature_m: f32, stature_known: bool },
-    /// The ground-truth body's feet (simulated sessions, datasets with fitted bodies).
-    GroundTruth,
-}
-
-impl FloorSource {
-    /// In words, for `inspect` and the page.
-    pub fn describe(&self) -> String {
-        match self {
-            FloorSource::SemidensePoints { file, points } => {
-                format!("semidense points ({points} well-constrained points at the floor, {file})")
-            }
-            FloorSource::StandingHead { standing_head_m, stature_m, stature_known } => format!(
-                "standing head height {standing_head_m:.2} m minus the glasses' height for a {stature_m:.2} m {}",
-                if *stature_known { "stature" } else { "mean-shape stature (no stature given)" }
-            ),
-            FloorSource::GroundTruth => "the ground-truth body's feet".into(),
-        }
-    }
-}
+pub use crate::model::{Floor, FloorSource};
 
 /// Heights binned at [`BIN_M`] over ±[`RANGE_M`]: fixed memory however many points.
 #[derive(Clone, Debug, PartialEq)]
@@ -196,6 +160,12 @@ pub fn floor_from_standing_head(session: &Session) -> Option<Floor> {
             stature_known: session.subject.height_m.is_some(),
         },
     })
+}
+
+/// `session`'s stored floor, else the estimate from its standing head
+/// ([`floor_from_standing_head`]).
+pub fn floor_or_estimate(session: &Session) -> Option<Floor> {
+    session.floor.clone().or_else(|| floor_from_standing_head(session))
 }
 
 #[cfg(test)]

@@ -40,6 +40,7 @@ use thiserror::Error;
 
 use crate::aria::trajectory::{Clock, read_closed_loop_trajectory, write_closed_loop_trajectory};
 use crate::capture::{Capture, CaptureError, Participant, View, ViewPeople};
+use crate::capture::{spread_fixed_poses, spread_fixed_poses_in_capture};
 use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
 use crate::json::{JsonCtx, join};
 use crate::keypoints::{read_keypoints_jsonl, write_keypoints_jsonl};
@@ -48,7 +49,7 @@ use crate::model::{
     ContextFeatureTrack, Floor, GroundTruth, Observer, ObserverOcclusion, Session, SubjectInfo, Trajectory, VideoRef,
     Wearer, WristSource,
 };
-use crate::placement::{Mount, Placement, WorldRef, spread_fixed_poses, spread_fixed_poses_in_capture};
+use crate::placement::{Mount, Placement, WorldRef};
 use egoexo_motion_io::npz::NpzWriter;
 
 use crate::npz::{NpyArray, NpyData, Npz};

@@ -16,8 +16,6 @@ use egoexo_core::rigid::RigidTransform;
 use egoexo_core::skeleton::{DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE, NUM_JOINTS, SkeletonError, SmplSkeleton};
 use serde::{Deserialize, Serialize};
 
-pub use crate::aria::hand_tracking::{HandTrackingForm, WristOrientation};
-pub use crate::floor::{Floor, FloorSource};
 pub use crate::placement::Placement;
 
 /// A recording: one wearer, zero or more observers, subject info, optional ground truth.
@@ -33,14 +31,6 @@ pub struct Session {
     /// The floor's height and how it was found ([`crate::floor`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub floor: Option<Floor>,
-}
-
-impl Session {
-    /// The stored floor, else the estimate from the standing head
-    /// ([`crate::floor::floor_from_standing_head`]).
-    pub fn floor_or_estimate(&self) -> Option<Floor> {
-        self.floor.clone().or_else(|| crate::floor::floor_from_standing_head(self))
-    }
 }
 
 /// A device trajectory: strictly increasing timestamps with one `T_world_device` each.
@@ -240,4 +230,92 @@ pub struct ObserverOcclusion {
     /// One mask per ground-truth frame: bit `k` set = exo keypoint `k` (network order, see
     /// `egoexo_core::exo_keypoints::ExoKeypoint`) was occluded in this observer's view.
     pub occluded: Vec<u16>,
+}
+
+/// Where the floor is.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Floor {
+    /// Height of the floor plane, metres (session world Y).
+    pub height_m: f32,
+    pub source: FloorSource,
+}
+
+/// How the floor height was found.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum FloorSource {
+    /// MPS semidense points: `points` well-constrained points in the floor's band.
+    SemidensePoints { file: String, points: u64 },
+    /// The standing head height minus the glasses' height above the soles for `stature_m`
+    /// (`stature_known`: from the subject info, else the mean shape's).
+    StandingHead { standing_head_m: f32, stature_m: f32, stature_known: bool },
+    /// The ground-truth body's feet (simulated sessions, datasets with fitted bodies).
+    GroundTruth,
+}
+
+impl FloorSource {
+    /// In words, for `inspect` and the page.
+    pub fn describe(&self) -> String {
+        match self {
+            FloorSource::SemidensePoints { file, points } => {
+                format!("semidense points ({points} well-constrained points at the floor, {file})")
+            }
+            FloorSource::StandingHead { standing_head_m, stature_m, stature_known } => format!(
+                "standing head height {standing_head_m:.2} m minus the glasses' height for a {stature_m:.2} m {}",
+                if *stature_known { "stature" } else { "mean-shape stature (no stature given)" }
+            ),
+            FloorSource::GroundTruth => "the ground-truth body's feet".into(),
+        }
+    }
+}
+
+/// Which published form a hand tracking file has.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HandTrackingForm {
+    /// `wrist_and_palm_poses.csv` without normals.
+    WristAndPalmV1,
+    /// `wrist_and_palm_poses.csv` with wrist and palm normals.
+    WristAndPalmV2,
+    /// `hand_tracking_results.csv`: landmarks and `T_device_wrist`.
+    HandTrackingResults,
+}
+
+impl HandTrackingForm {
+    /// A human-readable name.
+    pub fn describe(self) -> &'static str {
+        match self {
+            HandTrackingForm::WristAndPalmV1 => "MPS wrist_and_palm_poses.csv v1 (positions)",
+            HandTrackingForm::WristAndPalmV2 => "MPS wrist_and_palm_poses.csv v2 (positions and normals)",
+            HandTrackingForm::HandTrackingResults => "MPS hand_tracking_results.csv (T_device_wrist)",
+        }
+    }
+}
+
+/// How a wrist's orientation was obtained.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WristOrientation {
+    /// Measured by a wrist device.
+    Device,
+    /// Hand direction and MPS's wrist pose (−Y of `T_device_wrist` as the palm normal).
+    FromWristPose,
+    /// Hand direction and the file's wrist (or palm) normal.
+    FromNormals,
+    /// Hand direction measured; the palm is assumed to face the floor.
+    PalmDownAssumed,
+}
+
+impl WristOrientation {
+    /// What the networks receive, in words.
+    pub fn describe(self) -> &'static str {
+        match self {
+            WristOrientation::Device => "measured by the wrist devices",
+            WristOrientation::FromWristPose => "from the hand direction and MPS's wrist pose",
+            WristOrientation::FromNormals => "from the hand direction and the wrist normal",
+            WristOrientation::PalmDownAssumed => {
+                "hand direction measured, palm assumed to face the floor (the file has no normals)"
+            }
+        }
+    }
 }

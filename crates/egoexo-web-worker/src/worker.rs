@@ -1001,7 +1001,8 @@ fn session_summary(
         tracking_points: choice.mode.points(),
         tracking_reason: choice.reason,
         wrists: wrist_summaries(session, aligned),
-        floor: session.floor_or_estimate().map(|f| FloorSummary { height_m: f.height_m, source: f.source.describe() }),
+        floor: egoexo_session::floor::floor_or_estimate(session)
+            .map(|f| FloorSummary { height_m: f.height_m, source: f.source.describe() }),
         observers,
         ground_truth: aligned.ground_truth.is_some(),
         warnings,

@@ -183,7 +183,7 @@ fn wrist_coverage(aligned: &AlignedSession) -> Vec<WristCoverage> {
 }
 
 fn floor_line(session: &Session) -> String {
-    match (&session.floor, session.floor_or_estimate()) {
+    match (&session.floor, egoexo_session::floor::floor_or_estimate(session)) {
         (Some(f), _) => format!("{:.3} m, from {}", f.height_m + 0.0, f.source.describe()),
         (None, Some(f)) => {
             format!("{:.3} m, from {} (estimated: the file stores none)", f.height_m + 0.0, f.source.describe())
@@ -383,7 +383,7 @@ fn summary_json(imported: &Imported, aligned: &AlignedSession, problems: &[Strin
         })).collect::<Vec<_>>(),
         "wrist_source": s.wearer.wrist_source,
         "tracking": {"points": aligned.tracking_choice().mode.points(), "reason": aligned.tracking_choice().reason},
-        "floor": s.floor_or_estimate().map(|f| json!({"height_m": f.height_m, "source": f.source.describe(), "stored": s.floor.is_some()})),
+        "floor": egoexo_session::floor::floor_or_estimate(s).map(|f| json!({"height_m": f.height_m, "source": f.source.describe(), "stored": s.floor.is_some()})),
         "subject": subject_line(s),
         "observers": s.observers.iter().map(|o| json!({
             "id": o.id,

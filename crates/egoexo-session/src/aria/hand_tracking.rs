@@ -27,7 +27,6 @@
 
 use egoexo_core::glam::{DVec3, Mat3, Quat, Vec3};
 use egoexo_core::rigid::RigidTransform;
-use serde::{Deserialize, Serialize};
 
 use super::trajectory::QUATERNION_NORM_TOLERANCE;
 use crate::error::{ImportError, ImportErrorKind, Location, check_strictly_after, quote};
@@ -48,56 +47,7 @@ pub const WRIST_LANDMARK: usize = 5;
 /// The MPS landmark index of the palm centre in `hand_tracking_results.csv`.
 pub const PALM_CENTER_LANDMARK: usize = 20;
 
-/// Which published form a hand tracking file has.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum HandTrackingForm {
-    /// `wrist_and_palm_poses.csv` without normals.
-    WristAndPalmV1,
-    /// `wrist_and_palm_poses.csv` with wrist and palm normals.
-    WristAndPalmV2,
-    /// `hand_tracking_results.csv`: landmarks and `T_device_wrist`.
-    HandTrackingResults,
-}
-
-impl HandTrackingForm {
-    /// A human-readable name.
-    pub fn describe(self) -> &'static str {
-        match self {
-            HandTrackingForm::WristAndPalmV1 => "MPS wrist_and_palm_poses.csv v1 (positions)",
-            HandTrackingForm::WristAndPalmV2 => "MPS wrist_and_palm_poses.csv v2 (positions and normals)",
-            HandTrackingForm::HandTrackingResults => "MPS hand_tracking_results.csv (T_device_wrist)",
-        }
-    }
-}
-
-/// How a wrist's orientation was obtained.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum WristOrientation {
-    /// Measured by a wrist device.
-    Device,
-    /// Hand direction and MPS's wrist pose (−Y of `T_device_wrist` as the palm normal).
-    FromWristPose,
-    /// Hand direction and the file's wrist (or palm) normal.
-    FromNormals,
-    /// Hand direction measured; the palm is assumed to face the floor.
-    PalmDownAssumed,
-}
-
-impl WristOrientation {
-    /// What the networks receive, in words.
-    pub fn describe(self) -> &'static str {
-        match self {
-            WristOrientation::Device => "measured by the wrist devices",
-            WristOrientation::FromWristPose => "from the hand direction and MPS's wrist pose",
-            WristOrientation::FromNormals => "from the hand direction and the wrist normal",
-            WristOrientation::PalmDownAssumed => {
-                "hand direction measured, palm assumed to face the floor (the file has no normals)"
-            }
-        }
-    }
-}
+pub use crate::model::{HandTrackingForm, WristOrientation};
 
 /// Left or right.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

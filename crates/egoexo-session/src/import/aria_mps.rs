@@ -48,13 +48,14 @@ use crate::aria::semidense::{SEMIDENSE_FILES, SemidenseHeights, read_semidense_h
 use crate::aria::time_sync::{TIME_SYNC_FILE, TimeSync, read_time_sync};
 use crate::aria::trajectory::{Clock, CsvTrajectory, read_closed_loop_trajectory};
 use crate::aria::{AriaFrameSize, nominal_t_device_cpf, session_pose_from_file, t_session_world_from_gravity};
+use crate::capture::spread_fixed_poses;
 use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
 use crate::floor::{Floor, floor_from_points};
 use crate::format::{STATIC_CAMERA_FILE, read_static_camera};
 use crate::json::JsonCtx;
 use crate::keypoints::read_keypoints;
 use crate::model::{Observer, Session, SubjectInfo, Trajectory, VideoRef, Wearer, WristSource};
-use crate::placement::{Mount, Placement, spread_fixed_poses};
+use crate::placement::{Mount, Placement};
 use crate::vfs::FileTree;
 
 /// File name of an MPS closed-loop trajectory.

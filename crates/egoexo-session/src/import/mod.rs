@@ -165,7 +165,7 @@ pub fn import_session(tree: &FileTree, options: &ImportOptions) -> Result<Import
     }
     fit_full_resolution_cameras_to_keypoints(&mut session, &mut warnings);
     // A recording gets its floor here; a `.egoexo` keeps what it stores (readers estimate one
-    // where it stores none: `Session::floor_or_estimate`).
+    // where it stores none: `floor::floor_or_estimate`).
     if session.floor.is_none() && source != SourceKind::Egoexo {
         session.floor = crate::floor::floor_from_standing_head(&session);
     }

@@ -62,8 +62,8 @@ use thiserror::Error;
 /// Errors from the engine.
 #[derive(Debug, Error)]
 pub enum InferError {
-    #[error("{0}")]
-    Manifest(String),
+    #[error(transparent)]
+    Manifest(#[from] crate::manifest::ManifestError),
     #[error("model `{model}`: {message}")]
     Model { model: String, message: String },
     #[error("model file `{file}` does not match the manifest: sha256 {actual}, expected {expected}")]

@@ -126,80 +126,99 @@ pub struct Manifest {
     pub training: serde_json::Value,
 }
 
+/// What is wrong with a `manifest.json`.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum ManifestError {
+    #[error("manifest.json: {0}")]
+    Json(String),
+    #[error("manifest.json: format_version {found} is not supported (expected {MANIFEST_FORMAT_VERSION})")]
+    FormatVersion { found: u32 },
+    #[error("manifest.json: window {found} (this build uses {WINDOW})")]
+    Window { found: usize },
+    #[error("manifest.json: {points}-point live set has lookahead {lookahead}, expected below the window ({WINDOW})")]
+    Lookahead { points: u8, lookahead: usize },
+    #[error("manifest.json: two {points}-point sets with {}", .lookahead.map_or("no lookahead (offline)".to_string(), |l| format!("lookahead {l}")))]
+    DuplicateSet { points: u8, lookahead: Option<usize> },
+    #[error(
+        "manifest.json: {points}-point models expect ego feature layout v{version} ({dim} numbers per frame), this build computes v{EGO_FEATURE_LAYOUT_VERSION} ({EGO_FEATURE_DIM}){}",
+        if *.version < EGO_FEATURE_LAYOUT_VERSION {
+            " (older models, trained before the per-frame wrist validity of v2: use the models shipped with this build, or retrain them as training/README.md says)"
+        } else {
+            " (models newer than this build: update egoexo)"
+        }
+    )]
+    EgoLayout { points: u8, version: u32, dim: usize },
+    #[error(
+        "manifest.json: {points}-point gate expects gate feature layout v{version}, this build computes v{GATE_FEATURE_LAYOUT_VERSION}"
+    )]
+    GateLayout { points: u8, version: u32 },
+    #[error(
+        "manifest.json: {points}-point fusion expects exo token layout v{version} ({dim} numbers per keypoint), this build makes v{EXO_TOKEN_LAYOUT_VERSION} ({EXO_TOKEN_DIM}): retrain or use models made for this build"
+    )]
+    ExoLayout { points: u8, version: u32, dim: usize },
+    #[error("manifest.json: {points}-point set has a mismatched ego layout")]
+    EgoLayoutTracking { points: u8 },
+    #[error("manifest.json: max_observers {found} out of 1..=16")]
+    MaxObservers { found: usize },
+    #[error("manifest.json: `{file}` is listed twice with different sha256")]
+    ConflictingFile { file: String },
+    #[error("manifest.json: detector `{file}`: keypoints `{found}`, expected `coco17`")]
+    DetectorKeypoints { file: String, found: String },
+    #[error("manifest.json: detector `{file}`: {inputs} inputs and {outputs} outputs, expected one of each")]
+    DetectorTensors { file: String, inputs: usize, outputs: usize },
+    #[error("manifest.json: detector `{file}`: shapes {input:?} → {output:?}, expected [1, S, S, 3] → [1, 1, 17, 3]")]
+    DetectorShapes { file: String, input: Vec<usize>, output: Vec<usize> },
+    #[error("manifest.json: no network `{network}` in the {points}-point set: expected one of {expected}")]
+    NoNetwork { points: u8, network: String, expected: String },
+}
+
 impl Manifest {
     /// Parses and checks a manifest.
     pub fn from_json(bytes: &[u8]) -> Result<Self, InferError> {
-        let manifest: Manifest =
-            serde_json::from_slice(bytes).map_err(|e| InferError::Manifest(format!("manifest.json: {e}")))?;
+        let manifest: Manifest = serde_json::from_slice(bytes).map_err(|e| ManifestError::Json(e.to_string()))?;
         manifest.check()?;
         Ok(manifest)
     }
 
     fn check(&self) -> Result<(), InferError> {
         if self.format_version != MANIFEST_FORMAT_VERSION {
-            return Err(InferError::Manifest(format!(
-                "manifest.json: format_version {} is not supported (expected {MANIFEST_FORMAT_VERSION})",
-                self.format_version
-            )));
+            return Err(ManifestError::FormatVersion { found: self.format_version }.into());
         }
         if self.window != WINDOW {
-            return Err(InferError::Manifest(format!(
-                "manifest.json: window {} (this build uses {WINDOW})",
-                self.window
-            )));
+            return Err(ManifestError::Window { found: self.window }.into());
         }
         for (i, set) in self.model_sets.iter().enumerate() {
             let mode = set.tracking.points();
             if let Some(lookahead) = set.lookahead
                 && lookahead >= WINDOW
             {
-                return Err(InferError::Manifest(format!(
-                    "manifest.json: {mode}-point live set has lookahead {lookahead}, expected below the window ({WINDOW})"
-                )));
+                return Err(ManifestError::Lookahead { points: mode, lookahead }.into());
             }
             if self.model_sets[..i].iter().any(|s| s.tracking == set.tracking && s.lookahead == set.lookahead) {
-                return Err(InferError::Manifest(format!(
-                    "manifest.json: two {mode}-point sets with {}",
-                    set.lookahead.map_or("no lookahead (offline)".to_string(), |l| format!("lookahead {l}"))
-                )));
+                return Err(ManifestError::DuplicateSet { points: mode, lookahead: set.lookahead }.into());
             }
             if set.ego_feature_layout.version != EGO_FEATURE_LAYOUT_VERSION
                 || set.ego_feature_layout.dim != EGO_FEATURE_DIM
             {
-                let why = if set.ego_feature_layout.version < EGO_FEATURE_LAYOUT_VERSION {
-                    " (older models, trained before the per-frame wrist validity of v2: use the models shipped with this \
-                     build, or retrain them as training/README.md says)"
-                } else {
-                    " (models newer than this build: update egoexo)"
-                };
-                return Err(InferError::Manifest(format!(
-                    "manifest.json: {mode}-point models expect ego feature layout v{} ({} numbers per frame), this build computes v{EGO_FEATURE_LAYOUT_VERSION} ({EGO_FEATURE_DIM}){why}",
-                    set.ego_feature_layout.version, set.ego_feature_layout.dim
-                )));
+                return Err(ManifestError::EgoLayout {
+                    points: mode,
+                    version: set.ego_feature_layout.version,
+                    dim: set.ego_feature_layout.dim,
+                }
+                .into());
             }
             if set.gate_feature_layout.version != GATE_FEATURE_LAYOUT_VERSION {
-                return Err(InferError::Manifest(format!(
-                    "manifest.json: {mode}-point gate expects gate feature layout v{}, this build computes v{GATE_FEATURE_LAYOUT_VERSION}",
-                    set.gate_feature_layout.version
-                )));
+                return Err(ManifestError::GateLayout { points: mode, version: set.gate_feature_layout.version }.into());
             }
             let exo = set.exo_token_layout;
             if exo.version != EXO_TOKEN_LAYOUT_VERSION || exo.dim != EXO_TOKEN_DIM {
-                return Err(InferError::Manifest(format!(
-                    "manifest.json: {mode}-point fusion expects exo token layout v{} ({} numbers per keypoint), this build makes v{EXO_TOKEN_LAYOUT_VERSION} ({EXO_TOKEN_DIM}): retrain or use models made for this build",
-                    exo.version, exo.dim
-                )));
+                return Err(ManifestError::ExoLayout { points: mode, version: exo.version, dim: exo.dim }.into());
             }
             if set.ego_feature_layout.tracking != set.tracking {
-                return Err(InferError::Manifest(format!(
-                    "manifest.json: {mode}-point set has a mismatched ego layout"
-                )));
+                return Err(ManifestError::EgoLayoutTracking { points: mode }.into());
             }
             if set.max_observers == 0 || set.max_observers > 16 {
-                return Err(InferError::Manifest(format!(
-                    "manifest.json: max_observers {} out of 1..=16",
-                    set.max_observers
-                )));
+                return Err(ManifestError::MaxObservers { found: set.max_observers }.into());
             }
         }
         if let Some(detector) = &self.detector {
@@ -208,10 +227,7 @@ impl Manifest {
         let files: Vec<&ModelFile> = self.model_sets.iter().flat_map(ModelSetManifest::network_files).collect();
         for (i, file) in files.iter().enumerate() {
             if files[..i].iter().any(|f| f.file == file.file && f.sha256 != file.sha256) {
-                return Err(InferError::Manifest(format!(
-                    "manifest.json: `{}` is listed twice with different sha256",
-                    file.file
-                )));
+                return Err(ManifestError::ConflictingFile { file: file.file.clone() }.into());
             }
         }
         Ok(())
@@ -262,15 +278,17 @@ pub struct DetectorManifest {
 impl DetectorManifest {
     /// The model's square input side S, pixels; checks the file's declared shapes.
     pub fn input_size(&self) -> Result<u32, InferError> {
-        let bad = |what: String| InferError::Manifest(format!("manifest.json: detector `{}`: {what}", self.file.file));
+        let file = || self.file.file.clone();
         if self.keypoints != "coco17" {
-            return Err(bad(format!("keypoints `{}`, expected `coco17`", self.keypoints)));
+            return Err(ManifestError::DetectorKeypoints { file: file(), found: self.keypoints.clone() }.into());
         }
-        let [input] = &self.file.inputs[..] else { return Err(bad("expected one input".into())) };
-        let [output] = &self.file.outputs[..] else { return Err(bad("expected one output".into())) };
+        let ([input], [output]) = (&self.file.inputs[..], &self.file.outputs[..]) else {
+            let (inputs, outputs) = (self.file.inputs.len(), self.file.outputs.len());
+            return Err(ManifestError::DetectorTensors { file: file(), inputs, outputs }.into());
+        };
         match (&input.shape[..], &output.shape[..]) {
             ([1, h, w, 3], [1, 1, COCO17_COUNT, 3]) if h == w && (32..=1024).contains(h) => Ok(*h as u32),
-            (i, o) => Err(bad(format!("shapes {i:?} → {o:?}, expected [1, S, S, 3] → [1, 1, 17, 3]"))),
+            (i, o) => Err(ManifestError::DetectorShapes { file: file(), input: i.to_vec(), output: o.to_vec() }.into()),
         }
     }
 }

@@ -7,7 +7,7 @@
 
 use egoexo_infer::InferError;
 use egoexo_infer::cost::{MatmulProbe, MatmulShape, NetworkCost, bench_inputs, network_cost};
-use egoexo_infer::manifest::{Manifest, ModelFile, NETWORK_NAMES};
+use egoexo_infer::manifest::{Manifest, ManifestError, ModelFile, NETWORK_NAMES};
 use egoexo_infer::models::OnnxModel;
 
 use crate::WorkerError;
@@ -26,26 +26,27 @@ impl NetworkBench {
     /// Loads and optimises `network` (one of [`NETWORK_NAMES`]) of the offline
     /// `points`-point set of `manifest_json` from its file's `bytes` (sha256-checked).
     pub fn load(manifest_json: &[u8], points: u8, network: &str, bytes: Vec<u8>) -> Result<Self, WorkerError> {
-        let manifest = Manifest::from_json(manifest_json).map_err(WorkerError::Models)?;
-        let set = manifest.model_set_for_points(points).ok_or(WorkerError::Models(InferError::NoModels { points }))?;
+        let manifest = Manifest::from_json(manifest_json).map_err(WorkerError::Infer)?;
+        let set = manifest.model_set_for_points(points).ok_or(WorkerError::Infer(InferError::NoModels { points }))?;
         let file = set
             .network(network)
             .ok_or_else(|| {
-                WorkerError::Models(InferError::Manifest(format!(
-                    "no network `{network}`: expected {}",
-                    NETWORK_NAMES.join(", ")
-                )))
+                WorkerError::Infer(InferError::Manifest(ManifestError::NoNetwork {
+                    points,
+                    network: network.to_owned(),
+                    expected: NETWORK_NAMES.join(", "),
+                }))
             })?
             .clone();
         let digest = egoexo_infer::manifest::sha256_hex(&bytes);
         if digest != file.sha256 {
-            return Err(WorkerError::Models(InferError::Checksum {
+            return Err(WorkerError::Infer(InferError::Checksum {
                 file: file.file.clone(),
                 expected: file.sha256.clone(),
                 actual: digest,
             }));
         }
-        let model = OnnxModel::load(&file.file, &bytes, &file.input_shapes()).map_err(WorkerError::Models)?;
+        let model = OnnxModel::load(&file.file, &bytes, &file.input_shapes()).map_err(WorkerError::Infer)?;
         let inputs = bench_inputs(&file.inputs);
         Ok(NetworkBench { file, bytes, model, inputs, analysis: None })
     }
@@ -63,20 +64,16 @@ impl NetworkBench {
     /// One run; every output flattened and concatenated in declaration order.
     pub fn run(&self) -> Result<Vec<f32>, WorkerError> {
         let refs: Vec<&[f32]> = self.inputs.iter().map(Vec::as_slice).collect();
-        Ok(self.model.run(&refs).map_err(WorkerError::Models)?.concat())
+        Ok(self.model.run(&refs).map_err(WorkerError::Infer)?.concat())
     }
 
     /// Counts the FLOPs and builds the probe of the dominant product.
     pub fn analyse(&mut self) -> Result<(), WorkerError> {
-        let cost =
-            network_cost(&self.file.file, &self.bytes, &self.file.input_shapes()).map_err(WorkerError::Models)?;
+        let cost = network_cost(&self.file.file, &self.bytes, &self.file.input_shapes()).map_err(WorkerError::Infer)?;
         let shape = cost.dominant_matmul().ok_or_else(|| {
-            WorkerError::Models(InferError::Model {
-                model: self.file.file.clone(),
-                message: "no matrix product".into(),
-            })
+            WorkerError::Infer(InferError::Model { model: self.file.file.clone(), message: "no matrix product".into() })
         })?;
-        let probe = MatmulProbe::new(shape).map_err(WorkerError::Models)?;
+        let probe = MatmulProbe::new(shape).map_err(WorkerError::Infer)?;
         self.analysis = Some((cost, probe));
         Ok(())
     }
@@ -88,11 +85,8 @@ impl NetworkBench {
 
     /// Runs the probe once (its output's sum).
     pub fn run_probe(&self) -> Result<f32, WorkerError> {
-        let (_, probe) = self
-            .analysis
-            .as_ref()
-            .ok_or(WorkerError::Models(InferError::Manifest("the network bench has not been analysed".into())))?;
-        probe.run().map_err(WorkerError::Models)
+        let (_, probe) = self.analysis.as_ref().ok_or(WorkerError::BenchNotAnalysed)?;
+        probe.run().map_err(WorkerError::Infer)
     }
 }
 

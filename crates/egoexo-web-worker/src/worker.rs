@@ -45,8 +45,6 @@ pub use group::{GroupReconstruction, SelectedParticipant};
 #[derive(Debug, Error)]
 pub enum WorkerError {
     #[error(transparent)]
-    Models(InferError),
-    #[error(transparent)]
     Import(#[from] ImportError),
     #[error("{session}: {source}")]
     Align { session: String, source: AlignError },
@@ -74,6 +72,8 @@ pub enum WorkerError {
     SaveSession(String),
     #[error("the detector is not loaded yet")]
     NoDetectorLoaded,
+    #[error("the network bench has not been analysed: analyse it before running its probe")]
+    BenchNotAnalysed,
     #[error(transparent)]
     Pool(#[from] crate::pool::PoolError),
     #[error(transparent)]
@@ -92,9 +92,16 @@ impl WorkerError {
     /// The protocol's kind of this error.
     pub fn kind(&self) -> ErrorKind {
         match self {
-            WorkerError::Models(_) => ErrorKind::ModelsInvalid,
             WorkerError::NoModels => ErrorKind::ModelsMissing,
             WorkerError::Import(_) | WorkerError::Align { .. } => ErrorKind::Import,
+            // The kind comes from the engine's error, wherever it arose: a manifest or model
+            // file the engine refuses is the models' fault, anything else the reconstruction's.
+            WorkerError::Infer(
+                InferError::Manifest(_)
+                | InferError::Model { .. }
+                | InferError::Checksum { .. }
+                | InferError::ReadModel { .. },
+            ) => ErrorKind::ModelsInvalid,
             WorkerError::Infer(_) | WorkerError::Scene(_) => ErrorKind::Reconstruct,
             WorkerError::Export(_) => ErrorKind::Export,
             WorkerError::NoSession => ErrorKind::NoSession,
@@ -103,7 +110,9 @@ impl WorkerError {
             WorkerError::ShareRecording(_) | WorkerError::SaveSession(_) => ErrorKind::Export,
             WorkerError::Live(_) => ErrorKind::Reconstruct,
             WorkerError::Take(_) | WorkerError::Capture(_) | WorkerError::Registration(_) => ErrorKind::Import,
-            WorkerError::NoSuchParticipant(_) | WorkerError::NotReconstructed(_) => ErrorKind::BadRequest,
+            WorkerError::NoSuchParticipant(_) | WorkerError::NotReconstructed(_) | WorkerError::BenchNotAnalysed => {
+                ErrorKind::BadRequest
+            }
             WorkerError::Pool(_) | WorkerError::Detection(_) | WorkerError::NoDetectorLoaded => ErrorKind::Reconstruct,
         }
     }
@@ -314,7 +323,7 @@ impl SessionWorker {
     /// The files a manifest lists (paths relative to the models folder), for the caller to
     /// fetch before [`SessionWorker::load_models`].
     pub fn model_files(manifest_json: &[u8]) -> Result<Vec<ModelFileRef>, WorkerError> {
-        let manifest = Manifest::from_json(manifest_json).map_err(WorkerError::Models)?;
+        let manifest = Manifest::from_json(manifest_json).map_err(WorkerError::Infer)?;
         Ok(manifest
             .files()
             .into_iter()
@@ -331,10 +340,10 @@ impl SessionWorker {
         manifest_json: &[u8],
         read: impl FnMut(&str) -> Result<Vec<u8>, InferError>,
     ) -> Result<ModelsSummary, WorkerError> {
-        let manifest = Manifest::from_json(manifest_json).map_err(WorkerError::Models)?;
+        let manifest = Manifest::from_json(manifest_json).map_err(WorkerError::Infer)?;
         // Checked now, parsed and optimised per tracking mode when a reconstruction first
         // needs it: a session pays only for its own mode's networks.
-        let models = LoadedModels::load_with(&manifest, read, Loading::Deferred).map_err(WorkerError::Models)?;
+        let models = LoadedModels::load_with(&manifest, read, Loading::Deferred).map_err(WorkerError::Infer)?;
         let sets = manifest
             .model_sets
             .iter()
@@ -371,7 +380,7 @@ impl SessionWorker {
             .filter_map(|mode| models.offline().models(mode))
             .find_map(ModelSet::next_unprepared);
         match next {
-            Some(network) => network.prepare().map(|()| true).map_err(WorkerError::Models),
+            Some(network) => network.prepare().map(|()| true).map_err(WorkerError::Infer),
             None => Ok(false),
         }
     }
@@ -494,7 +503,7 @@ impl SessionWorker {
         let manifest = self.manifest.as_ref().ok_or(WorkerError::NoModels)?;
         let observer = self.observers_needing_detection().into_iter().next().unwrap_or_default();
         let entry = manifest.detector.as_ref().ok_or(crate::detection::DetectionError::NoDetector(observer))?;
-        self.detector = Some(Arc::new(KeypointDetector::load(entry, bytes).map_err(WorkerError::Models)?));
+        self.detector = Some(Arc::new(KeypointDetector::load(entry, bytes).map_err(WorkerError::Infer)?));
         Ok(())
     }
 

@@ -428,6 +428,16 @@ fn a_model_file_that_does_not_match_the_manifest_is_refused() {
     assert!(!worker.has_models());
     let err = SessionWorker::new().load_models(b"{\"format_version\": 99}", read_fixture_model).unwrap_err();
     assert!(err.to_string().contains("manifest.json"), "{err}");
+    assert_eq!(err.kind(), ErrorKind::ModelsInvalid);
+    // The kind comes from the engine's error wherever it arose: a manifest the engine refuses
+    // is the models' fault even on a reconstruction's path; an untracked head is not.
+    let refused = egoexo_web_worker::WorkerError::from(egoexo_infer::InferError::Manifest(
+        egoexo_infer::manifest::ManifestError::Window { found: 64 },
+    ));
+    assert_eq!(refused.kind(), ErrorKind::ModelsInvalid);
+    assert!(refused.to_string().contains("window 64"), "{refused}");
+    let untracked = egoexo_web_worker::WorkerError::from(egoexo_infer::InferError::NoValidFrames);
+    assert_eq!(untracked.kind(), ErrorKind::Reconstruct);
 }
 
 #[test]

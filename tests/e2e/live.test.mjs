@@ -64,6 +64,16 @@ const live = (app) => app.page.evaluate(() => {
   };
 });
 
+// Opens a live room from the page (Go live) and returns its device code once it is live.
+async function goLive(app) {
+  assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
+  await app.page.getByRole('button', { name: 'Go live' }).click();
+  await app.page.waitForSelector('#live-room[data-code]');
+  const code = await app.page.getAttribute('#live-room', 'data-code');
+  await app.waitState('live');
+  return code;
+}
+
 async function waitFor(app, predicate, what, timeout = 60_000) {
   const start = Date.now();
   for (;;) {
@@ -185,11 +195,7 @@ describe('live capture', () => {
     execFileSync(EGOEXO, ['walk', '--seconds', '30', '--wander', '-o', walk], { stdio: ['ignore', 'ignore', 'inherit'] });
     const app = await openApp(browser, '?backend=webgl2');
     try {
-      assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
-      await app.page.getByRole('button', { name: 'Go live' }).click();
-      await app.page.waitForSelector('#live-room[data-code]');
-      const code = await app.page.getAttribute('#live-room', 'data-code');
-      await app.waitState('live');
+      const code = await goLive(app);
       // Both observers stream in random worlds of their own (their hellos say so).
       const replay = egoexo([
         'live', 'replay', walk, '--url', APP_URL, '--room', code, '--duration-s', '28', '--own-worlds', '--seed', '3',
@@ -254,11 +260,7 @@ describe('live capture', () => {
     execFileSync(EGOEXO, ['walk', '--seconds', '14', '--participants', '2', '--identities', '-o', pair], { stdio: ['ignore', 'ignore', 'inherit'] });
     const app = await openApp(browser, '?backend=webgl2');
     try {
-      assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
-      await app.page.getByRole('button', { name: 'Go live' }).click();
-      await app.page.waitForSelector('#live-room[data-code]');
-      const code = await app.page.getAttribute('#live-room', 'data-code');
-      await app.waitState('live');
+      const code = await goLive(app);
       const replay = egoexo(['live', 'replay', pair, '--url', APP_URL, '--room', code, '--duration-s', '12']);
       const shown = await waitFor(app, (l) => l.frames >= 20 && (l.lastFrame?.wearers ?? []).length === 2, 'frames of both wearers');
       // The wearer whose head streamed first is the one whose facts are shown.

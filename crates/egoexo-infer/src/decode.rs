@@ -23,6 +23,7 @@ use crate::InferError;
 use crate::inputs::{POSE_DIM, decode_pose};
 use crate::passes::WindowOutput;
 use crate::reconstruction::{Method, ObserverGates, Reconstruction};
+use crate::windows::WindowError;
 use crate::windows::crossfade_weight;
 
 /// A window-frame 6D row whose root block cannot be read (never produced by the networks).
@@ -90,12 +91,12 @@ impl MotionAssembler {
     pub fn add(&mut self, window: &WindowOutput) -> Result<(), InferError> {
         let plan = &window.plan;
         if plan.frames.start < self.first || window.poses.len() < plan.len() * POSE_DIM {
-            return Err(InferError::Window(format!(
-                "window {:?} arrives after frame {} was given out, or with {} pose values",
-                plan.frames,
-                self.first,
-                window.poses.len()
-            )));
+            return Err(WindowError::OutOfOrder {
+                frames: plan.frames.clone(),
+                given_out: self.first,
+                pose_values: window.poses.len(),
+            }
+            .into());
         }
         let end = plan.frames.end - self.first;
         while self.pending.len() < end {
@@ -191,11 +192,7 @@ pub fn assemble_reconstruction(
     floor_y: Option<f32>,
 ) -> Result<Reconstruction, InferError> {
     if frames.len() != aligned.timeline.frames || frames.iter().enumerate().any(|(i, f)| f.frame != i) {
-        return Err(InferError::Window(format!(
-            "{} decoded frames do not cover the {}-frame timeline in order",
-            frames.len(),
-            aligned.timeline.frames
-        )));
+        return Err(WindowError::Incomplete { decoded: frames.len(), timeline: aligned.timeline.frames }.into());
     }
     let valid: Vec<bool> = frames.iter().map(|f| f.pose.is_some()).collect();
     let mut poses: Vec<Option<SmplPose>> = frames.iter().map(|f| f.pose).collect();
@@ -214,7 +211,7 @@ pub fn assemble_reconstruction(
         })
         .collect();
     let motion = SmplMotion::new(aligned.timeline.fps, aligned.timeline.start_ns, skeleton, None, poses)
-        .map_err(|e| InferError::Window(e.to_string()))?;
+        .map_err(WindowError::Motion)?;
     Ok(Reconstruction {
         method,
         tracking,

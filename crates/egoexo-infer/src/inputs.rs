@@ -36,6 +36,7 @@ use egoexo_core::rotation::Rot6d;
 use egoexo_core::skeleton::{NUM_BODY_JOINTS, NUM_JOINTS, SmplJoint, SmplPose, SmplSkeleton};
 
 use crate::InferError;
+use crate::windows::WindowError;
 use crate::windows::{WINDOW, WindowPlan};
 
 /// Numbers per frame of a pose in 6D: root orientation (6) + 21 body rotations (126).
@@ -70,11 +71,7 @@ pub fn ego_window(
     tracking: TrackingMode,
 ) -> Result<EgoWindow, InferError> {
     if plan.frames.is_empty() || plan.frames.len() > WINDOW || plan.frames.end > aligned.head.poses.len() {
-        return Err(InferError::Window(format!(
-            "window {:?} does not fit the {}-frame timeline",
-            plan.frames,
-            aligned.head.poses.len()
-        )));
+        return Err(WindowError::OffTimeline { frames: plan.frames.clone(), timeline: aligned.head.poses.len() }.into());
     }
     // One frame of history from inside the span, so the first frame's velocities are real.
     let history = usize::from(plan.frames.start > plan.span.start);

@@ -35,6 +35,7 @@ use crate::passes::{EgoPassOutput, WindowOutput, ego_pass, observer_fusion_pass}
 use crate::plan::{ReconstructionPlan, resolve_tracking};
 use crate::reconstruction::{CoarsePose, Method, Progress, ReconstructOptions, Reconstruction, Stage};
 use crate::timing::{Clock, StageTimer, StageTimings, TimedStage};
+use crate::windows::WindowError;
 
 /// Windows per chunk of a job (sequential steps and [`ReconstructionJob::run_in_parallel`]):
 /// enough to keep a few cores busy, few enough that a chunk's outputs stay small (an
@@ -116,13 +117,11 @@ impl ReconstructionJob {
         methods: &[Method],
     ) -> Result<Self, InferError> {
         let Some(first) = methods.first() else {
-            return Err(InferError::Methods("no method to run".into()));
+            return Err(InferError::NoMethod);
         };
         let coarse = first.coarse_pose();
         if let Some(other) = methods.iter().find(|m| m.coarse_pose() != coarse) {
-            return Err(InferError::Methods(format!(
-                "{first} and {other} take their coarse poses from different sources and cannot share an ego pass"
-            )));
+            return Err(InferError::CoarseSourcesDiffer { first: *first, other: *other });
         }
         let tracking = resolve_tracking(aligned, options.tracking)?;
         engine.coarse_pose_source(coarse, tracking)?;
@@ -172,7 +171,7 @@ impl ReconstructionJob {
     /// held do.
     pub fn set_chunk(&mut self, windows: usize) -> Result<(), InferError> {
         if self.steps != 0 {
-            return Err(InferError::Window("a job's chunk is set before its first step".into()));
+            return Err(WindowError::ChunkAfterStart.into());
         }
         self.chunk = windows.max(1);
         Ok(())
@@ -212,9 +211,10 @@ impl ReconstructionJob {
         timer: &mut StageTimer<'_>,
     ) -> Result<Vec<WindowOutput>, InferError> {
         self.plan.check_session(aligned)?;
-        let plan = self.plan.windows.get(window).ok_or_else(|| {
-            InferError::Window(format!("window {window} of a plan of {} windows", self.plan.windows.len()))
-        })?;
+        let plan =
+            self.plan.windows.get(window).ok_or_else(|| {
+                InferError::from(WindowError::NoSuchWindow { window, windows: self.plan.windows.len() })
+            })?;
         let tracking = self.plan.tracking;
         let source = engine.coarse_pose_source(self.coarse, tracking)?;
         let ego = ego_pass(aligned, plan, tracking, source, timer)?;
@@ -378,7 +378,7 @@ impl ReconstructionJob {
         use rayon::prelude::*;
 
         if self.done_steps() != 0 {
-            return Err(InferError::Window("a job runs in parallel only from its start".into()));
+            return Err(WindowError::ParallelAfterStart.into());
         }
         self.plan.check_session(aligned)?;
         let tracking = self.plan.tracking;
@@ -450,11 +450,7 @@ impl ReconstructionJob {
         timer: &mut StageTimer<'_>,
     ) -> Result<Vec<Reconstruction>, InferError> {
         if !self.is_done() {
-            return Err(InferError::Window(format!(
-                "the job is unfinished: {} of {} steps ran",
-                self.done_steps(),
-                self.total_steps()
-            )));
+            return Err(WindowError::Unfinished { done: self.done_steps(), total: self.total_steps() }.into());
         }
         self.plan.check_session(aligned)?;
         let tracking = self.plan.tracking;
@@ -512,7 +508,7 @@ impl Engine {
         progress: &mut dyn FnMut(Progress) -> bool,
     ) -> Result<Reconstruction, InferError> {
         let mut all = self.reconstruct_each(aligned, options, &[options.method], progress)?;
-        all.pop().ok_or(InferError::Window("no reconstruction".into()))
+        all.pop().ok_or(WindowError::NoResult.into())
     }
 
     /// Reconstructs with every method of `methods`, results in that order. Methods that share
@@ -569,7 +565,7 @@ impl Engine {
                 results[i] = Some(r);
             }
         }
-        results.into_iter().map(|r| r.ok_or(InferError::Methods("no method to run".into()))).collect()
+        results.into_iter().map(|r| r.ok_or(InferError::NoMethod)).collect()
     }
 }
 

@@ -79,11 +79,13 @@ pub enum InferError {
     #[error("the wearer's head is never tracked on the timeline: nothing to reconstruct")]
     NoValidFrames,
     #[error("window: {0}")]
-    Window(String),
+    Window(#[from] crate::windows::WindowError),
     #[error("ego features: {0}")]
     Features(#[from] egoexo_core::ego_features::FeatureError),
-    #[error("methods: {0}")]
-    Methods(String),
+    #[error("methods: no method to run")]
+    NoMethod,
+    #[error("methods: {first} and {other} take their coarse poses from different sources and cannot share an ego pass")]
+    CoarseSourcesDiffer { first: crate::reconstruction::Method, other: crate::reconstruction::Method },
     #[error("cancelled")]
     Cancelled,
     /// A chunk's outputs computed elsewhere (another worker) that do not fit the job, or

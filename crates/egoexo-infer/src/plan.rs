@@ -9,6 +9,7 @@ use egoexo_core::aligned::AlignedSession;
 use egoexo_core::ego_features::TrackingMode;
 
 use crate::InferError;
+use crate::windows::WindowError;
 use crate::windows::{WINDOW, WindowPlan, plan_windows, valid_spans};
 
 /// How to cut the timeline into windows.
@@ -105,13 +106,13 @@ impl ReconstructionPlan {
     pub fn check_session(&self, aligned: &AlignedSession) -> Result<(), InferError> {
         let max_observer = self.observers.iter().max().map_or(0, |&o| o + 1);
         if aligned.timeline.frames != self.frames || aligned.observers.len() < max_observer {
-            return Err(InferError::Window(format!(
-                "the session has {} frames and {} observers; the plan was made for {} frames and at least {}",
-                aligned.timeline.frames,
-                aligned.observers.len(),
-                self.frames,
-                max_observer
-            )));
+            return Err(WindowError::SessionMismatch {
+                frames: aligned.timeline.frames,
+                observers: aligned.observers.len(),
+                plan_frames: self.frames,
+                plan_observers: max_observer,
+            }
+            .into());
         }
         Ok(())
     }

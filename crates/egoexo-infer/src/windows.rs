@@ -96,6 +96,34 @@ pub fn crossfade_weight(i: usize, len: usize, ramp: usize, starts_span: bool, en
     up.min(down).max(1e-3)
 }
 
+/// A window, a job's step or a decode that does not fit what it was made for: a caller's
+/// mistake (a plan used with another session, steps out of order), never bad input data.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum WindowError {
+    #[error("window {frames:?} does not fit the {timeline}-frame timeline")]
+    OffTimeline { frames: std::ops::Range<usize>, timeline: usize },
+    #[error("window {frames:?} arrives after frame {given_out} was given out, or with {pose_values} pose values")]
+    OutOfOrder { frames: std::ops::Range<usize>, given_out: usize, pose_values: usize },
+    #[error("{decoded} decoded frames do not cover the {timeline}-frame timeline in order")]
+    Incomplete { decoded: usize, timeline: usize },
+    #[error("the decoded motion: {0}")]
+    Motion(#[from] egoexo_core::motion::MotionError),
+    #[error("a job's chunk is set before its first step")]
+    ChunkAfterStart,
+    #[error("window {window} of a plan of {windows} windows")]
+    NoSuchWindow { window: usize, windows: usize },
+    #[error("a job runs in parallel only from its start")]
+    ParallelAfterStart,
+    #[error("the job is unfinished: {done} of {total} steps ran")]
+    Unfinished { done: usize, total: usize },
+    #[error(
+        "the session has {frames} frames and {observers} observers; the plan was made for {plan_frames} frames and at least {plan_observers}"
+    )]
+    SessionMismatch { frames: usize, observers: usize, plan_frames: usize, plan_observers: usize },
+    #[error("no reconstruction came out of the job")]
+    NoResult,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

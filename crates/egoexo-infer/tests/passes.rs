@@ -10,6 +10,7 @@ use egoexo_core::TrackingMode;
 use egoexo_infer::decode::{MotionAssembler, assemble_reconstruction};
 use egoexo_infer::passes::{CoarsePoseSource, ExoMode, ego_pass, exo_pass, fusion_pass};
 use egoexo_infer::plan::{ReconstructionPlan, resolve_tracking};
+use egoexo_infer::windows::WindowError;
 use egoexo_infer::{Engine, InferError, Method, NetworkRuns, ReconstructOptions, Stage, StageTimer, TimedStage};
 
 fn engine() -> Engine {
@@ -248,9 +249,9 @@ fn methods_with_different_coarse_poses_cannot_share_a_job() {
     let aligned = aligned_session(3.0, 1, TrackingMode::OnePoint, 12);
     let err =
         engine().start(&aligned, &ReconstructOptions::default(), &[Method::EgoExo, Method::RestPose]).unwrap_err();
-    assert!(matches!(err, InferError::Methods(_)), "{err}");
+    assert!(matches!(err, InferError::CoarseSourcesDiffer { first: Method::EgoExo, other: Method::RestPose }), "{err}");
     assert!(err.to_string().contains("ego-exo and rest-pose"), "{err}");
-    assert!(matches!(engine().start(&aligned, &ReconstructOptions::default(), &[]), Err(InferError::Methods(_))));
+    assert!(matches!(engine().start(&aligned, &ReconstructOptions::default(), &[]), Err(InferError::NoMethod)));
 }
 
 #[test]
@@ -263,10 +264,11 @@ fn a_job_steps_window_by_window_and_finishes_only_when_done() {
     job.step(&engine, &aligned).unwrap().unwrap();
     assert_eq!(job.done_steps(), 1);
     let unfinished = job.clone().finish(&aligned).unwrap_err();
+    assert!(matches!(unfinished, InferError::Window(WindowError::Unfinished { done: 1, .. })), "{unfinished}");
     assert!(unfinished.to_string().contains("1 of"), "{unfinished}");
     // Another session's timeline is refused rather than indexed.
     let other = aligned_session(2.0, 1, TrackingMode::ThreePoint, 14);
-    assert!(matches!(job.step(&engine, &other), Err(InferError::Window(_))));
+    assert!(matches!(job.step(&engine, &other), Err(InferError::Window(WindowError::SessionMismatch { .. }))));
     let mut steps = 1;
     while job.step(&engine, &aligned).unwrap().is_some() {
         steps += 1;

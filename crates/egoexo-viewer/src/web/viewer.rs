@@ -253,9 +253,18 @@ struct State {
     notified: Option<(usize, u64, bool)>,
     scene_generation: u64,
     drag: Option<Drag>,
-    recovering: bool,
-    /// Set once drawing failed for good; the viewer then stops drawing.
-    broken: Option<String>,
+    drawing: DrawState,
+}
+
+/// Whether the viewer can draw.
+#[derive(Clone, Debug, PartialEq)]
+enum DrawState {
+    /// Drawing on the target's backend.
+    Drawing,
+    /// The WebGPU device was lost; a WebGL2 target on a fresh canvas is being made.
+    Recovering,
+    /// Drawing failed for good (why); nothing is drawn any more.
+    Broken(String),
 }
 
 impl State {
@@ -428,8 +437,8 @@ fn tick(weak: &Weak<RefCell<State>>, now_ms: f64) {
         }
         let lost = s.target.gpu.health.lost();
         if let Some(reason) = lost {
-            if s.target.gpu.backend == ActiveBackend::WebGpu && !s.recovering && s.broken.is_none() {
-                s.recovering = true;
+            if s.target.gpu.backend == ActiveBackend::WebGpu && s.drawing == DrawState::Drawing {
+                s.drawing = DrawState::Recovering;
                 log_warn(&format!("the WebGPU device was lost ({reason}); switching to WebGL2"));
                 true
             } else {
@@ -437,11 +446,11 @@ fn tick(weak: &Weak<RefCell<State>>, now_ms: f64) {
             }
         } else {
             if s.dirty
-                && s.broken.is_none()
+                && !matches!(s.drawing, DrawState::Broken(_))
                 && let Err(e) = s.draw()
             {
                 log_error(&e.to_string());
-                s.broken = Some(e.to_string());
+                s.drawing = DrawState::Broken(e.to_string());
             }
             false
         }
@@ -460,9 +469,9 @@ async fn recover_on_webgl2(weak: Weak<RefCell<State>>) {
     let result = webgl2_target(old_canvas, true).await;
     let Some(state) = weak.upgrade() else { return };
     let Ok(mut s) = state.try_borrow_mut() else { return };
-    s.recovering = false;
     match result {
         Ok(mut target) => {
+            s.drawing = DrawState::Drawing;
             target.renderer.set_static_lines(&static_lines_or_grid(s.scene.as_ref()));
             s.canvas_listeners.remove_all();
             s.canvas_listeners = attach_canvas_listeners(&weak, &target.canvas);
@@ -471,7 +480,7 @@ async fn recover_on_webgl2(weak: Weak<RefCell<State>>) {
         }
         Err(e) => {
             log_error(&format!("could not switch to WebGL2: {e}"));
-            s.broken = Some(e.to_string());
+            s.drawing = DrawState::Broken(e.to_string());
         }
     }
 }
@@ -721,8 +730,7 @@ impl Viewer {
             notified: None,
             scene_generation: 0,
             drag: None,
-            recovering: false,
-            broken: None,
+            drawing: DrawState::Drawing,
         }));
         let weak = Rc::downgrade(&state);
         {
@@ -1081,6 +1089,9 @@ impl Viewer {
 
     /// Why drawing stopped for good, if it did (`undefined` while all is well).
     pub fn failure(&self) -> Option<String> {
-        self.read(|s| s.broken.clone())
+        self.read(|s| match &s.drawing {
+            DrawState::Broken(why) => Some(why.clone()),
+            DrawState::Drawing | DrawState::Recovering => None,
+        })
     }
 }

@@ -7,7 +7,8 @@
 //! wearer/head/closed_loop_trajectory.csv        trajectories: the Aria MPS CSV layout
 //! wearer/left_wrist/closed_loop_trajectory.csv  (optional)
 //! wearer/right_wrist/closed_loop_trajectory.csv (optional)
-//! observers/<id>/closed_loop_trajectory.csv
+//! observers/<id>/closed_loop_trajectory.csv    a worn observer (a static camera has `pose`, or
+//!                                               none and a `placement`, in the manifest)
 //! observers/<id>/keypoints.jsonl                (optional) JSON-lines keypoints
 //! observers/<id>/context_features.npz           (optional) timestamps_ns (N,), values (N, D)
 //! ground_truth.npz                              (optional) SMPL motion + occlusion labels

@@ -140,21 +140,27 @@ pub fn run(args: Args) -> Result<()> {
     let truth = perturbation.map(|p| perturb_observer_worlds(&mut sim.session, &p, args.seed));
     save_egoexo_with(&sim.session, videos, &args.out, args.folder)
         .with_context(|| format!("writing {}", args.out.display()))?;
-    if let Some(truth) = &truth {
+    report_written(
+        &args,
+        truth.as_deref(),
+        "observers",
+        format!("{:.0} s of walking, {} observers", args.seconds, args.observers),
+    )
+}
+
+/// Says what was written (`what`, and its size for a file) and, for worlds moved apart
+/// (`truth`, of `moved`), where the truth went.
+fn report_written(args: &Args, truth: Option<&[WorldTruth]>, moved: &str, what: String) -> Result<()> {
+    if let Some(truth) = truth {
         println!(
-            "moved {} observers into worlds of their own; the truth is in {}",
+            "moved {} {moved} into worlds of their own; the truth is in {}",
             truth.len(),
             write_truth(&args.out, truth)?.display()
         );
     }
     let bytes = std::fs::metadata(&args.out).map(|m| m.len()).unwrap_or(0);
-    println!(
-        "wrote {} ({:.0} s of walking, {} observers{})",
-        args.out.display(),
-        args.seconds,
-        args.observers,
-        if args.folder { String::new() } else { format!(", {:.1} MB", bytes as f64 / 1e6) }
-    );
+    let size = if args.folder { String::new() } else { format!(", {:.1} MB", bytes as f64 / 1e6) };
+    println!("wrote {} ({what}{size})", args.out.display());
     Ok(())
 }
 
@@ -180,21 +186,9 @@ fn write_group(args: &Args) -> Result<()> {
     let truth = perturbation(args)?.map(|p| perturb_capture_worlds(&mut capture, &p, args.seed));
     save_capture(&capture, Default::default(), &args.out, args.folder)
         .with_context(|| format!("writing {}", args.out.display()))?;
-    if let Some(truth) = &truth {
-        println!(
-            "moved {} participants into worlds of their own; the truth is in {}",
-            truth.len(),
-            write_truth(&args.out, truth)?.display()
-        );
-    }
-    let bytes = std::fs::metadata(&args.out).map(|m| m.len()).unwrap_or(0);
-    println!(
-        "wrote {} ({:.0} s, {} participants walking together, {} bystanders{})",
-        args.out.display(),
-        args.seconds,
-        args.participants,
-        args.bystanders,
-        if args.folder { String::new() } else { format!(", {:.1} MB", bytes as f64 / 1e6) }
+    let what = format!(
+        "{:.0} s, {} participants walking together, {} bystanders",
+        args.seconds, args.participants, args.bystanders
     );
-    Ok(())
+    report_written(args, truth.as_deref(), "participants", what)
 }

@@ -282,6 +282,25 @@ impl std::fmt::Debug for WorkerClock {
 }
 
 /// The worker: models, the open session and its reconstructions.
+///
+/// **Modes.** One session open (a recording of one wearer), or a capture of several
+/// participants (`group` set): then `session` and `results` are always the *shown*
+/// participant's, and the others' results wait in the group. Every method below works on the
+/// shown one unless it names a participant.
+///
+/// **Call order.**
+/// 1. `load_models` (and `load_detector` once a session needs it: `observers_needing_detection`).
+/// 2. Open: `import_archive` / `open_imported` (observers are registered here, `auto`), or
+///    `open_share`, or "Stop and keep" of a live take.
+/// 3. Reconstruct — one wearer: `reconstruct` (or a job stepped by the page's runtime; a pool
+///    runs its chunks with `run_pool_chunk`). A capture: `begin_group_reconstruction`, then for
+///    each participant it returns `open_participant_for_reconstruction` and the same job, then
+///    `finish_group_reconstruction` (which shows again who was shown); `select_participant`
+///    switches who is shown afterwards.
+/// 4. Use the results: `export`, `pack_share`, the scene.
+///
+/// Opening anything drops the previous session, results and group; a call out of order is a
+/// typed error (`NoModels`, `NoSession`, `NoReconstruction`), never a panic.
 #[derive(Debug, Default)]
 pub struct SessionWorker {
     models: Option<LoadedModels>,

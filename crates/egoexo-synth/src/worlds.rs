@@ -4,6 +4,7 @@
 //! each into a random world of its own (a yaw, a horizontal translation, a floor offset, and
 //! maybe a clock offset) and returns the truth, for registration's tests and evaluation.
 
+use egoexo_core::ego_features::heading_yaw;
 use egoexo_core::glam::{Quat, Vec3};
 use egoexo_core::rigid::RigidTransform;
 use egoexo_session::capture::{Capture, ViewPeople};
@@ -45,10 +46,10 @@ pub struct WorldTruth {
 }
 
 impl WorldTruth {
-    /// The yaw of `t_session_world`, degrees (a positive yaw turns +X towards −Z).
+    /// The yaw of `t_session_world`, degrees (a positive yaw turns +X towards −Z; for a
+    /// rotation with tilt, its heading: `egoexo_core::ego_features::heading_yaw`).
     pub fn yaw_deg(&self) -> f64 {
-        let forward = self.t_session_world.rotation * Vec3::X;
-        f64::from((-forward.z).atan2(forward.x).to_degrees())
+        f64::from(heading_yaw(self.t_session_world.rotation).to_degrees())
     }
 }
 

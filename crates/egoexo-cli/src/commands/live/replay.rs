@@ -13,6 +13,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use egoexo_core::camera::CameraCalibration;
+use egoexo_core::ego_features::heading_yaw;
 use egoexo_core::glam::{Quat, Vec3};
 use egoexo_core::rigid::RigidTransform;
 use egoexo_protocol::live::{
@@ -128,12 +129,11 @@ pub struct WorldReport {
 
 impl WorldReport {
     fn new(id: &str, from_s: f64, t_session_world: &RigidTransform) -> Self {
-        let forward = t_session_world.rotation * Vec3::X;
         let t = t_session_world.translation;
         Self {
             id: id.to_string(),
             from_s,
-            yaw_deg: f64::from((-forward.z).atan2(forward.x)).to_degrees(),
+            yaw_deg: f64::from(heading_yaw(t_session_world.rotation).to_degrees()),
             translation_m: [f64::from(t.x), f64::from(t.y), f64::from(t.z)],
         }
     }

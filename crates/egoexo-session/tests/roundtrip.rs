@@ -223,8 +223,10 @@ proptest! {
         let zip = write_egoexo_zip(&s).unwrap();
         let imported = import_session(&FileTree::from_zip("s.egoexo", zip, Limits::default()).unwrap(), &ImportOptions::default()).unwrap();
         prop_assert_eq!(&imported.session, &s);
-        let (from_folder, _) = read_egoexo(&support::tree("s", write_egoexo_files(&s).unwrap())).unwrap();
+        let (from_folder, warnings) = read_egoexo(&support::tree("s", write_egoexo_files(&s).unwrap())).unwrap();
         prop_assert_eq!(&from_folder, &s);
+        // The writer writes only keys the reader knows (format/keys.rs).
+        prop_assert!(!warnings.iter().any(|w| w.message.contains("unknown field")), "{:?}", warnings);
     }
 }
 
@@ -251,8 +253,9 @@ proptest! {
         let files = write_capture_files(&capture).unwrap();
         let manifest: serde_json::Value = serde_json::from_slice(&files["session.json"]).unwrap();
         prop_assert_eq!(manifest["version"].as_u64(), Some(3));
-        let (back, _) = read_capture(&support::tree("c", files.clone())).unwrap();
+        let (back, warnings) = read_capture(&support::tree("c", files.clone())).unwrap();
         prop_assert_eq!(&back, &capture);
+        prop_assert!(!warnings.iter().any(|w| w.message.contains("unknown field")), "{:?}", warnings);
         // Several participants to reconstruct: not one session.
         if capture.participants.len() > 1 {
             let error = read_egoexo(&support::tree("c", files)).unwrap_err().to_string();

@@ -50,11 +50,14 @@ mod read;
 mod session;
 mod write;
 
-pub use capture::{MAX_PARTICIPANTS, save_capture, write_capture_files, write_capture_zip};
+#[cfg(not(target_arch = "wasm32"))]
+pub use capture::save_capture;
+pub use capture::{MAX_PARTICIPANTS, write_capture_files, write_capture_zip};
 pub use session::{
-    STATIC_CAMERA_FILE, read_static_camera, save_egoexo, save_egoexo_with, write_egoexo_files, write_egoexo_zip,
-    write_egoexo_zip_with,
+    STATIC_CAMERA_FILE, read_static_camera, write_egoexo_files, write_egoexo_zip, write_egoexo_zip_with,
 };
+#[cfg(not(target_arch = "wasm32"))]
+pub use session::{save_egoexo, save_egoexo_with};
 
 /// The manifest's file name.
 pub const MANIFEST_FILE: &str = "session.json";

@@ -16,6 +16,9 @@
 //!
 //! - [`pool`] — a pool of workers sharing one reconstruction: the session handed to helpers,
 //!   chunk sizes, and [`pool::ChunkSchedule`] (who computes which chunk; decoding in order).
+//! - [`coordinator`] — the pool's roles as state machines the runtime and the native tests
+//!   both drive: [`coordinator::PoolCoordinator`] (one pooled job) and
+//!   [`coordinator::PoolHelper`] (a helper's answers).
 //! - [`bench`] — the bench page's network probe (`NetworkBench` in JS): one network on
 //!   deterministic inputs, its FLOPs and a matrix-product probe, timed by the page.
 //! - [`live`] — [`live::LiveReconstructor`]: a take streaming in from the live relay,
@@ -27,6 +30,7 @@
 //! here reads the clock or spawns threads; timing belongs to the page.
 
 pub mod bench;
+pub mod coordinator;
 pub mod detection;
 pub mod live;
 pub mod pool;

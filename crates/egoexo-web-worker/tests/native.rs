@@ -508,14 +508,17 @@ fn a_packed_share_opens_elsewhere_with_the_same_scene_exports_and_recording() {
     assert_eq!(err.kind(), ErrorKind::ShareInvalid);
 }
 
-/// A pool of two: the coordinator and one helper, driven the way the wasm message loop
-/// drives them (the helper answers one step late, so chunks arrive out of order), with the
-/// helper failing on its second chunk.
+/// A pool of three: the coordinator and two helpers as the wasm message loop drives them —
+/// the same state machines ([`PoolCoordinator`], [`PoolHelper`]), the messages moved by hand
+/// — with the helpers answering one turn late (so chunks arrive out of order) and the second
+/// helper panicking on its first chunk.
 #[test]
 fn a_pool_of_workers_reconstructs_exactly_what_one_worker_does() {
-    use egoexo_infer::ChunkOutputs;
-    use egoexo_web_worker::pool::ChunkSchedule;
+    use egoexo_protocol::ByteBuf;
+    use egoexo_protocol::worker::{WorkerEvent, WorkerRequest};
+    use egoexo_web_worker::coordinator::{HelperMessage, NextTurn, PoolCoordinator, PoolHelper};
 
+    const JOB: u32 = 7;
     let (single, _) = reconstructed();
     let mut coordinator = worker_with_models();
     coordinator.import_archive(SESSION_NAME, SESSION.to_vec()).unwrap();
@@ -524,44 +527,51 @@ fn a_pool_of_workers_reconstructs_exactly_what_one_worker_does() {
     task.set_chunk_size(1).unwrap();
     let chunks = task.chunk_count();
     assert!(chunks >= 3, "{chunks} chunks");
-    let session = coordinator.pool_session().unwrap();
-    let helper_job = helper.start_pool_helper(&session, true, task.chunk_size()).unwrap();
-    assert_eq!(helper_job.chunk_count(), chunks);
     // Bytes that are not a session: a clear error.
+    let session = coordinator.pool_session().unwrap();
     let err = helper.start_pool_helper(&session[..session.len() / 2], true, 1).unwrap_err();
     assert!(err.to_string().contains("not an aligned session"), "{err}");
+    // A chunk of a job the helper does not hold: an error event, not a panic.
+    let stray = WorkerRequest::<ByteBuf>::PoolChunk { job: JOB, chunk: 0 };
+    let Some(WorkerEvent::Error { job: Some(JOB), message, .. }) = PoolHelper::default().answer(&helper, &stray) else {
+        panic!("no error for a chunk of a job not held")
+    };
+    assert!(message.contains("no pool job 7"), "{message}");
 
-    let mut schedule = ChunkSchedule::new(chunks);
-    let (mut in_flight, mut helper_chunks, mut progress) = (None::<Vec<u8>>, 0, Vec::new());
-    while !schedule.is_done() {
-        if let Some(bytes) = in_flight.take() {
-            let outputs = ChunkOutputs::from_bytes(&bytes).unwrap();
-            assert!(schedule.finished(Some(0), outputs));
-        }
-        if let Some(chunk) = schedule.assign(0) {
-            helper_chunks += 1;
-            if helper_chunks == 2 {
-                schedule.helper_failed(0);
-            } else {
-                in_flight = Some(helper.run_pool_chunk(&helper_job, chunk).unwrap());
+    let (mut pool, mut posted) = PoolCoordinator::start::<ByteBuf>(&coordinator, &task, JOB, true, &[0, 1]).unwrap();
+    assert!(matches!(posted[..], [(0, WorkerRequest::PoolJob { job: JOB, .. }), (1, WorkerRequest::PoolJob { .. })]));
+    let mut helpers = [PoolHelper::default(), PoolHelper::default()];
+    let (mut inbox, mut progress, mut lost) = (Vec::<HelperMessage<ByteBuf>>::new(), Vec::new(), Vec::new());
+    for turns in 0.. {
+        assert!(turns < 10_000, "the pool never finished");
+        // What the helper answered last turn arrives now; it answers this turn's requests.
+        let arrived = std::mem::take(&mut inbox);
+        for (to, request) in posted.drain(..) {
+            if to == 1 && matches!(request, WorkerRequest::PoolChunk { .. }) {
+                inbox.push((to, Ok(WorkerEvent::Panic { message: "the helper panicked".into() })));
+                continue;
+            }
+            if let Some(answer) = helpers[to].answer(&helper, &request) {
+                inbox.push((to, Ok(answer)));
             }
         }
-        if let Some(chunk) = schedule.take_own() {
-            let mut own = ChunkOutputs::new(chunk, task.method_count());
-            for window in task.chunk_windows(chunk) {
-                own.push_window(coordinator.run_pool_window(&mut task, window).unwrap());
-            }
-            assert!(schedule.finished(None, own));
-        }
-        while let Some(outputs) = schedule.next_to_decode() {
-            progress.push(coordinator.add_pool_chunk(&mut task, &outputs).unwrap());
+        let turn = pool.turn(&coordinator, &mut task, arrived).unwrap();
+        posted = turn.to_helpers;
+        progress.extend(turn.progress);
+        lost.extend(turn.lost);
+        if turn.next == NextTurn::Done {
+            break;
         }
     }
-    assert_eq!(schedule.failed_helpers(), 1);
+    let shared = pool.summary(&task);
+    assert_eq!((shared.workers, shared.chunks, shared.failed_helpers), (3, chunks, 1));
+    assert!(shared.helper_chunks >= 1, "{shared:?}");
+    assert!(matches!(&lost[..], [l] if l.helper == 1 && l.dead), "{lost:?}");
     assert_eq!(progress.len(), chunks);
     assert!(progress.windows(2).all(|p| p[0].done < p[1].done));
     let last = progress.last().unwrap();
     assert_eq!(last.done, last.total);
+    task.set_pool_summary(shared);
     let summary = coordinator.finish_reconstruction(task).unwrap();
     // The same numbers, bit for bit, and every network run counted once wherever it ran.
     assert_eq!(coordinator.scene_json().unwrap(), single.scene_json().unwrap());

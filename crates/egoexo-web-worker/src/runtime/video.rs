@@ -316,17 +316,17 @@ impl Runtime {
     async fn load_detector(&self, file: &egoexo_protocol::worker::ModelFileRef) -> Result<(), DetectFailure> {
         let models = |(kind, message)| DetectFailure::Models(kind, message);
         let key = self.cache_key(file).map_err(models)?;
-        let cache = super::open_cache(&self.scope).await;
+        let cache = super::models::open_cache(&self.scope).await;
         if let Some(cache) = &cache
-            && let Some(bytes) = super::cached_bytes(cache, &key).await
+            && let Some(bytes) = super::models::cached_bytes(cache, &key).await
         {
             if self.worker.borrow_mut().load_detector(&bytes).is_ok() {
                 return Ok(());
             }
             let _ = JsFuture::from(cache.delete_with_str(&key)).await;
         }
-        let url = super::resolve_url(&file.file, &self.models_url).map_err(models)?;
-        let bytes = super::fetch_bytes(&self.scope, &url, false).await.map_err(models)?;
+        let url = super::models::resolve_url(&file.file, &self.models_url).map_err(models)?;
+        let bytes = super::models::fetch_bytes(&self.scope, &url, false).await.map_err(models)?;
         self.worker.borrow_mut().load_detector(&bytes).map_err(|e| DetectFailure::Models(e.kind(), e.to_string()))?;
         if let Some(cache) = &cache {
             let body = Uint8Array::from(bytes.as_slice());

@@ -1,17 +1,21 @@
 //! The `Viewer` JS class: a canvas, a GPU device behind it, the scene, and the 3D view's UI
-//! state (orbit camera, playback, layer toggles), advanced by `requestAnimationFrame`.
+//! state (orbit camera, playback, layer toggles), advanced by `requestAnimationFrame`
+//! (`frame_loop.rs`), drawn on the backend `canvas.rs` chose, moved by `input.rs`.
 
 use std::cell::RefCell;
-use std::rc::{Rc, Weak};
+use std::rc::Rc;
 
 use egoexo_scene::SceneData;
-use wasm_bindgen::prelude::*;
-use web_sys::{Event, EventTarget, HtmlCanvasElement, KeyboardEvent, PointerEvent, WheelEvent};
-
 use glam::Vec3;
+use wasm_bindgen::prelude::*;
+use web_sys::HtmlCanvasElement;
 
+use super::canvas::{CanvasTarget, connect};
+use super::frame_loop::{Animation, notify_frame, start_animation, static_lines_or_grid};
+use super::input::{Drag, Listeners, attach_canvas_listeners, attach_window_listeners};
+use super::js_error;
 use crate::camera::{OrbitCamera, ViewPoint};
-use crate::error::{ActiveBackend, BackendPreference, ViewerError};
+use crate::error::{BackendPreference, ViewerError};
 use crate::playback::Playback;
 use crate::plots::{PlotLayout, describe_frame, frame_at, render_plots, x_of_frame};
 use crate::scene::{
@@ -19,246 +23,39 @@ use crate::scene::{
     static_lines, view_bounds,
 };
 
-use super::gpu::{self, Gpu};
-use super::renderer::Renderer;
-
-fn js_error(e: ViewerError) -> JsError {
-    JsError::new(&e.to_string())
-}
-
-fn log_error(message: &str) {
-    web_sys::console::error_1(&format!("egoexo viewer: {message}").into());
-}
-
-fn log_warn(message: &str) {
-    web_sys::console::warn_1(&format!("egoexo viewer: {message}").into());
-}
-
-/// The canvas, its device and surface, and the renderer drawing into it.
-struct CanvasTarget {
-    canvas: HtmlCanvasElement,
-    gpu: Gpu,
-    surface: wgpu::Surface<'static>,
-    config: wgpu::SurfaceConfiguration,
-    renderer: Renderer,
-}
-
-impl CanvasTarget {
-    fn new(canvas: HtmlCanvasElement, gpu: Gpu, surface: wgpu::Surface<'static>) -> Result<Self, ViewerError> {
-        let (width, height) = (canvas.width().max(1), canvas.height().max(1));
-        let config = gpu::configure_surface(&gpu, &surface, width, height)?;
-        let renderer = Renderer::new(&gpu.device, &gpu.queue, config.format, gpu::msaa_supported(&gpu, config.format));
-        Ok(Self { canvas, gpu, surface, config, renderer })
-    }
-
-    /// Sets the drawing buffer to `width × height` pixels (clamped to the device's limit).
-    fn resize(&mut self, width: u32, height: u32) {
-        let max = gpu::max_texture_side(&self.gpu);
-        let (width, height) = (width.clamp(1, max), height.clamp(1, max));
-        if (width, height) == (self.config.width, self.config.height) {
-            return;
-        }
-        self.canvas.set_width(width);
-        self.canvas.set_height(height);
-        self.config.width = width;
-        self.config.height = height;
-        self.surface.configure(&self.gpu.device, &self.config);
-    }
-
-    /// Draws `list` seen by `camera` and presents it. `false` when the canvas gave no texture
-    /// this time (draw again on the next animation frame).
-    fn draw(&mut self, view_point: &ViewPoint, list: &FrameDrawList) -> Result<bool, ViewerError> {
-        let frame = match self.surface.get_current_texture() {
-            wgpu::CurrentSurfaceTexture::Success(frame) | wgpu::CurrentSurfaceTexture::Suboptimal(frame) => frame,
-            wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
-                self.surface.configure(&self.gpu.device, &self.config);
-                return Ok(false);
-            }
-            wgpu::CurrentSurfaceTexture::Timeout | wgpu::CurrentSurfaceTexture::Occluded => return Ok(false),
-            wgpu::CurrentSurfaceTexture::Validation => {
-                return Err(ViewerError::Gpu("the canvas surface raised a validation error".into()));
-            }
-        };
-        let view = frame.texture.create_view(&Default::default());
-        self.renderer.render(&view, (self.config.width, self.config.height), view_point, list);
-        self.gpu.queue.present(frame);
-        Ok(true)
-    }
-}
-
-/// A fresh canvas in place of `old` (same attributes: id, classes, style, size), for when `old`
-/// already holds a context of the other kind (a canvas keeps its first context type for life).
-fn replace_canvas(old: &HtmlCanvasElement) -> Result<HtmlCanvasElement, ViewerError> {
-    let fresh = gpu::scratch_canvas(old.width(), old.height())?;
-    for name in old.get_attribute_names().iter() {
-        if let Some(name) = name.as_string()
-            && name != "style"
-            && let Some(value) = old.get_attribute(&name)
-        {
-            fresh.set_attribute(&name, &value).map_err(|e| ViewerError::Dom(format!("copying {name}: {e:?}")))?;
-        }
-    }
-    // Inline styles through the CSSOM: a Content-Security-Policy without 'unsafe-inline'
-    // refuses a `style` attribute set by script.
-    fresh.style().set_css_text(&old.style().css_text());
-    if old.parent_node().is_some() {
-        old.replace_with_with_node_1(&fresh).map_err(|e| ViewerError::Dom(format!("replacing the canvas: {e:?}")))?;
-    }
-    Ok(fresh)
-}
-
-/// Pauses between WebGL2 attempts, ms: right after a WebGPU device is lost the browser's GPU
-/// process may still be restarting and refuse new contexts for a moment.
-const WEBGL2_RETRY_DELAYS_MS: [i32; 4] = [100, 250, 500, 1000];
-
-/// A WebGL2 target on `canvas` (unless `fresh_canvas`), else on a fresh canvas put in its
-/// place (a canvas that holds another kind of context cannot give a WebGL2 one), retried a few
-/// times when the browser refuses the context.
-async fn webgl2_target(canvas: HtmlCanvasElement, fresh_canvas: bool) -> Result<CanvasTarget, ViewerError> {
-    let canvas = if fresh_canvas {
-        replace_canvas(&canvas)?
-    } else {
-        match gpu::webgl2(&canvas).await {
-            Ok((gpu, surface)) => return CanvasTarget::new(canvas, gpu, surface),
-            Err(e) => {
-                log_warn(&format!("{e}; retrying on a fresh canvas element"));
-                replace_canvas(&canvas)?
-            }
-        }
-    };
-    let mut attempt = gpu::webgl2(&canvas).await;
-    for delay in WEBGL2_RETRY_DELAYS_MS {
-        match attempt {
-            Ok(_) => break,
-            Err(e) => log_warn(&format!("{e}; retrying in {delay} ms")),
-        }
-        gpu::sleep_ms(delay).await;
-        attempt = gpu::webgl2(&canvas).await;
-    }
-    let (gpu, surface) = attempt?;
-    CanvasTarget::new(canvas, gpu, surface)
-}
-
-/// A WebGPU target on `canvas`, after checking that WebGPU can present at all when `check`.
-async fn webgpu_target(canvas: HtmlCanvasElement, check: bool) -> Result<CanvasTarget, ViewerError> {
-    let gpu = gpu::webgpu().await?;
-    if check {
-        gpu::probe_webgpu_presentation(&gpu).await.map_err(ViewerError::WebGpuCannotPresent)?;
-    }
-    let surface = match gpu::webgpu_surface(&gpu, &canvas) {
-        Ok(surface) => (canvas, surface),
-        Err(_) => {
-            let fresh = replace_canvas(&canvas)?;
-            let surface = gpu::webgpu_surface(&gpu, &fresh)?;
-            (fresh, surface)
-        }
-    };
-    CanvasTarget::new(surface.0, gpu, surface.1)
-}
-
-/// The target for `preference`: forced backends or an error; `Auto` tries WebGPU (verified)
-/// and falls back to WebGL2, logging why.
-async fn connect(canvas: HtmlCanvasElement, preference: BackendPreference) -> Result<CanvasTarget, ViewerError> {
-    match preference {
-        BackendPreference::WebGpu => webgpu_target(canvas, true).await,
-        BackendPreference::WebGpuUnchecked => webgpu_target(canvas, false).await,
-        BackendPreference::WebGl2 => webgl2_target(canvas, false).await,
-        BackendPreference::Auto => match webgpu_target(canvas.clone(), true).await {
-            Ok(target) => Ok(target),
-            Err(e) => {
-                web_sys::console::info_1(&format!("egoexo viewer: using WebGL2 ({e})").into());
-                webgl2_target(canvas, false).await
-            }
-        },
-    }
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum DragMode {
-    Orbit,
-    Pan,
-}
-
-#[derive(Clone, Copy, Debug)]
-struct Drag {
-    pointer_id: i32,
-    mode: DragMode,
-    last: (f32, f32),
-}
-
-/// An attached event listener: its target, event name and closure.
-type Listener = (EventTarget, &'static str, Closure<dyn FnMut(Event)>);
-
-/// Event listeners to remove when the viewer goes away or the canvas is replaced.
-#[derive(Default)]
-struct Listeners(Vec<Listener>);
-
-impl Listeners {
-    fn add(&mut self, target: &EventTarget, event: &'static str, passive: bool, closure: Closure<dyn FnMut(Event)>) {
-        let options = web_sys::AddEventListenerOptions::new();
-        options.set_passive(passive);
-        if target
-            .add_event_listener_with_callback_and_add_event_listener_options(
-                event,
-                closure.as_ref().unchecked_ref(),
-                &options,
-            )
-            .is_err()
-        {
-            log_warn(&format!("could not listen to {event}"));
-        }
-        self.0.push((target.clone(), event, closure));
-    }
-
-    /// Detaches every listener; the closures are dropped after the current task, so a
-    /// listener may end the viewer from inside itself.
-    fn remove_all(&mut self) {
-        let entries = std::mem::take(&mut self.0);
-        for (target, event, closure) in &entries {
-            let _ = target.remove_event_listener_with_callback(event, closure.as_ref().unchecked_ref());
-        }
-        drop_later(entries);
-    }
-}
-
-/// Drops `value` after the current JS task (closures must not be dropped while running).
-fn drop_later<T: 'static>(value: T) {
-    wasm_bindgen_futures::spawn_local(async move { drop(value) });
-}
-
-struct State {
-    target: CanvasTarget,
-    canvas_listeners: Listeners,
-    scene: Option<SceneData>,
+pub(super) struct State {
+    pub(super) target: CanvasTarget,
+    pub(super) canvas_listeners: Listeners,
+    pub(super) scene: Option<SceneData>,
     /// [`SceneGeometry::of`] the scene.
-    geometry: Option<SceneGeometry>,
-    camera: OrbitCamera,
+    pub(super) geometry: Option<SceneGeometry>,
+    pub(super) camera: OrbitCamera,
     /// The orbit camera's target follows the wearer: target = follow anchor (x, z) + offset
     /// (whose y is the target's height).
-    follow: bool,
-    follow_offset: Vec3,
+    pub(super) follow: bool,
+    pub(super) follow_offset: Vec3,
     /// Set once the page chose follow on or off; until then each scene decides
     /// ([`SceneGeometry::moving_wearer`]).
-    follow_chosen: bool,
-    playback: Playback,
-    layers: LayerToggles,
+    pub(super) follow_chosen: bool,
+    pub(super) playback: Playback,
+    pub(super) layers: LayerToggles,
     /// CSS size of the canvas (pixels) and the device pixel ratio.
-    css_size: (f32, f32),
-    device_pixel_ratio: f32,
-    dirty: bool,
+    pub(super) css_size: (f32, f32),
+    pub(super) device_pixel_ratio: f32,
+    pub(super) dirty: bool,
     /// Timestamp of the last animation frame that found playback running, ms.
-    last_tick_ms: Option<f64>,
-    on_frame: Option<js_sys::Function>,
+    pub(super) last_tick_ms: Option<f64>,
+    pub(super) on_frame: Option<js_sys::Function>,
     /// The frame, scene generation and playing state last reported to `on_frame`.
-    notified: Option<(usize, u64, bool)>,
-    scene_generation: u64,
-    drag: Option<Drag>,
-    drawing: DrawState,
+    pub(super) notified: Option<(usize, u64, bool)>,
+    pub(super) scene_generation: u64,
+    pub(super) drag: Option<Drag>,
+    pub(super) drawing: DrawState,
 }
 
 /// Whether the viewer can draw.
 #[derive(Clone, Debug, PartialEq)]
-enum DrawState {
+pub(super) enum DrawState {
     /// Drawing on the target's backend.
     Drawing,
     /// The WebGPU device was lost; a WebGL2 target on a fresh canvas is being made.
@@ -268,13 +65,13 @@ enum DrawState {
 }
 
 impl State {
-    fn aspect(&self) -> f32 {
+    pub(super) fn aspect(&self) -> f32 {
         self.target.config.width as f32 / self.target.config.height.max(1) as f32
     }
 
     /// Shows `scene` from frame 0 at the current playback speed; `frame_camera` points the
     /// camera at it (otherwise the camera stays where the user put it).
-    fn show_scene(&mut self, scene: SceneData, frame_camera: bool) -> Result<(), ViewerError> {
+    pub(super) fn show_scene(&mut self, scene: SceneData, frame_camera: bool) -> Result<(), ViewerError> {
         let speed = self.playback.speed();
         self.playback = Playback::new(scene.frames, f64::from(scene.fps));
         self.playback.set_speed(speed)?;
@@ -298,7 +95,7 @@ impl State {
 
     /// Frames the scene at the shown frame: the wearer's whole session and the observers, or,
     /// when following, the wearer and the observers now.
-    fn reset_camera(&mut self) {
+    pub(super) fn reset_camera(&mut self) {
         let aspect = self.aspect();
         let frame = self.playback.frame();
         let bounds = self
@@ -312,7 +109,7 @@ impl State {
     }
 
     /// The followed point at the shown frame, with y = 0 (the view keeps its height).
-    fn anchor(&self) -> Option<Vec3> {
+    pub(super) fn anchor(&self) -> Option<Vec3> {
         let anchor = follow_anchor(self.scene.as_ref()?, self.playback.frame())?;
         Some(Vec3::new(anchor.x, 0.0, anchor.z))
     }
@@ -320,7 +117,7 @@ impl State {
     /// Where this frame is drawn from, and the layers drawn: through the chosen observer's
     /// camera while it is tracked (its own frustum and rays hidden), else the orbit camera —
     /// moved with the wearer when following — which shows that observer's frustum as usual.
-    fn view(&mut self) -> (ViewPoint, LayerToggles) {
+    pub(super) fn view(&mut self) -> (ViewPoint, LayerToggles) {
         let aspect = self.aspect();
         let mut layers = self.layers;
         if let Some(index) = layers.through_observer {
@@ -341,7 +138,7 @@ impl State {
         (self.camera.view_point(aspect), layers)
     }
 
-    fn draw(&mut self) -> Result<(), ViewerError> {
+    pub(super) fn draw(&mut self) -> Result<(), ViewerError> {
         let (view_point, layers) = self.view();
         let list = match (&self.scene, &self.geometry) {
             (Some(scene), Some(geometry)) => build_frame(scene, geometry, self.playback.frame(), layers),
@@ -354,13 +151,6 @@ impl State {
     }
 }
 
-struct Animation {
-    closure: Option<Closure<dyn FnMut(f64)>>,
-    handle: Option<i32>,
-    stopped: bool,
-}
-
-/// The egoexo 3D view on a canvas. See the crate docs for the JS API.
 /// The CSS colour the viewer draws participant colour `index` in (a capture's participants,
 /// `ParticipantSummary::colour`), for the page's legend.
 #[wasm_bindgen]
@@ -368,6 +158,7 @@ pub fn participant_colour(index: usize) -> String {
     crate::colors::css(crate::colors::participant_colour(index))
 }
 
+/// The egoexo 3D view on a canvas. See the crate docs for the JS API.
 #[wasm_bindgen]
 pub struct Viewer {
     state: Rc<RefCell<State>>,
@@ -384,13 +175,7 @@ impl std::fmt::Debug for Viewer {
 impl Drop for Viewer {
     fn drop(&mut self) {
         if let Ok(mut animation) = self.animation.try_borrow_mut() {
-            animation.stopped = true;
-            if let (Some(handle), Some(window)) = (animation.handle.take(), web_sys::window()) {
-                let _ = window.cancel_animation_frame(handle);
-            }
-            if let Some(closure) = animation.closure.take() {
-                drop_later(closure);
-            }
+            animation.stop();
         }
         self.window_listeners.remove_all();
         if let Ok(mut state) = self.state.try_borrow_mut() {
@@ -398,294 +183,6 @@ impl Drop for Viewer {
             state.on_frame = None;
         }
     }
-}
-
-/// Calls `on_frame` when the shown frame (or the playing state) changed since the last call;
-/// never while the state is borrowed (the callback may call back into the viewer).
-fn notify_frame(state: &Rc<RefCell<State>>) {
-    let call = {
-        let Ok(mut s) = state.try_borrow_mut() else { return };
-        let now = (s.playback.frame(), s.scene_generation, s.playback.is_playing());
-        if s.notified == Some(now) {
-            return;
-        }
-        s.notified = Some(now);
-        s.on_frame.clone().map(|f| (f, now.0, s.playback.time_s()))
-    };
-    if let Some((callback, frame, time)) = call
-        && let Err(e) = callback.call2(&JsValue::NULL, &JsValue::from(frame as f64), &JsValue::from(time))
-    {
-        log_error(&format!("on_frame callback threw: {e:?}"));
-    }
-}
-
-/// One animation frame: advance playback, recover from a lost WebGPU device, draw if needed.
-fn tick(weak: &Weak<RefCell<State>>, now_ms: f64) {
-    let Some(state) = weak.upgrade() else { return };
-    let recover = {
-        let Ok(mut s) = state.try_borrow_mut() else { return };
-        // Time only counts between two ticks that both found playback running: the first tick
-        // after `play` does not catch up on the time spent paused.
-        let playing = s.playback.is_playing();
-        let dt_s = match (playing, s.last_tick_ms) {
-            (true, Some(last)) => (now_ms - last) / 1000.0,
-            _ => 0.0,
-        };
-        s.last_tick_ms = playing.then_some(now_ms);
-        if s.playback.advance(dt_s) {
-            s.dirty = true;
-        }
-        let lost = s.target.gpu.health.lost();
-        if let Some(reason) = lost {
-            if s.target.gpu.backend == ActiveBackend::WebGpu && s.drawing == DrawState::Drawing {
-                s.drawing = DrawState::Recovering;
-                log_warn(&format!("the WebGPU device was lost ({reason}); switching to WebGL2"));
-                true
-            } else {
-                false
-            }
-        } else {
-            if s.dirty
-                && !matches!(s.drawing, DrawState::Broken(_))
-                && let Err(e) = s.draw()
-            {
-                log_error(&e.to_string());
-                s.drawing = DrawState::Broken(e.to_string());
-            }
-            false
-        }
-    };
-    if recover {
-        wasm_bindgen_futures::spawn_local(recover_on_webgl2(Rc::downgrade(&state)));
-    }
-    notify_frame(&state);
-}
-
-/// Replaces a lost WebGPU target with WebGL2 on a fresh canvas in the same place.
-async fn recover_on_webgl2(weak: Weak<RefCell<State>>) {
-    let Some(old_canvas) = weak.upgrade().and_then(|s| s.try_borrow().ok().map(|s| s.target.canvas.clone())) else {
-        return;
-    };
-    let result = webgl2_target(old_canvas, true).await;
-    let Some(state) = weak.upgrade() else { return };
-    let Ok(mut s) = state.try_borrow_mut() else { return };
-    match result {
-        Ok(mut target) => {
-            s.drawing = DrawState::Drawing;
-            target.renderer.set_static_lines(&static_lines_or_grid(s.scene.as_ref()));
-            s.canvas_listeners.remove_all();
-            s.canvas_listeners = attach_canvas_listeners(&weak, &target.canvas);
-            s.target = target;
-            s.dirty = true;
-        }
-        Err(e) => {
-            log_error(&format!("could not switch to WebGL2: {e}"));
-            s.drawing = DrawState::Broken(e.to_string());
-        }
-    }
-}
-
-fn static_lines_or_grid(scene: Option<&SceneData>) -> Vec<crate::mesh::LineVertex> {
-    match scene {
-        Some(scene) => static_lines(scene),
-        None => static_lines(&SceneData::new("", 30.0, 0, "")),
-    }
-}
-
-fn start_animation(weak: Weak<RefCell<State>>) -> Rc<RefCell<Animation>> {
-    let animation = Rc::new(RefCell::new(Animation { closure: None, handle: None, stopped: false }));
-    let animation_weak = Rc::downgrade(&animation);
-    let closure = Closure::<dyn FnMut(f64)>::new(move |now_ms: f64| {
-        tick(&weak, now_ms);
-        if let Some(animation) = animation_weak.upgrade() {
-            request_frame(&animation);
-        }
-    });
-    animation.borrow_mut().closure = Some(closure);
-    request_frame(&animation);
-    animation
-}
-
-fn request_frame(animation: &Rc<RefCell<Animation>>) {
-    let Ok(mut a) = animation.try_borrow_mut() else { return };
-    if a.stopped {
-        return;
-    }
-    let handle = match (web_sys::window(), a.closure.as_ref()) {
-        (Some(window), Some(closure)) => window.request_animation_frame(closure.as_ref().unchecked_ref()).ok(),
-        _ => None,
-    };
-    a.handle = handle;
-}
-
-fn with_state(weak: &Weak<RefCell<State>>, f: impl FnOnce(&mut State)) {
-    if let Some(state) = weak.upgrade()
-        && let Ok(mut s) = state.try_borrow_mut()
-    {
-        f(&mut s);
-    }
-}
-
-fn listener(f: impl FnMut(Event) + 'static) -> Closure<dyn FnMut(Event)> {
-    Closure::<dyn FnMut(Event)>::new(f)
-}
-
-/// Pointer orbit (left drag) and pan (right or middle drag, or left with Shift/Ctrl/⌘), wheel
-/// zoom, double-click to re-frame the scene.
-fn attach_canvas_listeners(weak: &Weak<RefCell<State>>, canvas: &HtmlCanvasElement) -> Listeners {
-    let mut listeners = Listeners::default();
-    // Touch drags orbit instead of scrolling the page.
-    let _ = canvas.style().set_property("touch-action", "none");
-    let target: &EventTarget = canvas.as_ref();
-
-    let w = weak.clone();
-    let c = canvas.clone();
-    listeners.add(
-        target,
-        "pointerdown",
-        true,
-        listener(move |event| {
-            let Some(e) = event.dyn_ref::<PointerEvent>() else { return };
-            let pan = e.button() == 1 || e.button() == 2 || e.shift_key() || e.ctrl_key() || e.meta_key();
-            let mode = if pan { DragMode::Pan } else { DragMode::Orbit };
-            let _ = c.set_pointer_capture(e.pointer_id());
-            with_state(&w, |s| {
-                s.drag =
-                    Some(Drag { pointer_id: e.pointer_id(), mode, last: (e.client_x() as f32, e.client_y() as f32) });
-            });
-        }),
-    );
-    let w = weak.clone();
-    listeners.add(
-        target,
-        "pointermove",
-        true,
-        listener(move |event| {
-            let Some(e) = event.dyn_ref::<PointerEvent>() else { return };
-            with_state(&w, |s| {
-                let Some(drag) = s.drag.as_mut().filter(|d| d.pointer_id == e.pointer_id()) else { return };
-                let now = (e.client_x() as f32, e.client_y() as f32);
-                let (dx, dy) = (now.0 - drag.last.0, now.1 - drag.last.1);
-                drag.last = now;
-                if s.layers.through_observer.is_some() {
-                    return; // an observer's view stays where its camera is
-                }
-                match drag.mode {
-                    DragMode::Orbit => s.camera.orbit(dx, dy),
-                    DragMode::Pan => {
-                        let height = s.css_size.1;
-                        let before = s.camera.target;
-                        s.camera.pan(dx, dy, height);
-                        // Following: the pan moves the view relative to the wearer.
-                        s.follow_offset += s.camera.target - before;
-                    }
-                }
-                s.dirty = true;
-            });
-        }),
-    );
-    for event in ["pointerup", "pointercancel"] {
-        let w = weak.clone();
-        let c = canvas.clone();
-        listeners.add(
-            target,
-            event,
-            true,
-            listener(move |event| {
-                let Some(e) = event.dyn_ref::<PointerEvent>() else { return };
-                let _ = c.release_pointer_capture(e.pointer_id());
-                with_state(&w, |s| {
-                    if s.drag.is_some_and(|d| d.pointer_id == e.pointer_id()) {
-                        s.drag = None;
-                    }
-                });
-            }),
-        );
-    }
-    let w = weak.clone();
-    listeners.add(
-        target,
-        "wheel",
-        false,
-        listener(move |event| {
-            let Some(e) = event.dyn_ref::<WheelEvent>() else { return };
-            e.prevent_default();
-            with_state(&w, |s| {
-                let scale = match e.delta_mode() {
-                    WheelEvent::DOM_DELTA_LINE => 16.0,
-                    WheelEvent::DOM_DELTA_PAGE => f64::from(s.css_size.1),
-                    _ => 1.0,
-                };
-                s.camera.zoom((e.delta_y() * scale) as f32);
-                s.dirty = true;
-            });
-        }),
-    );
-    listeners.add(target, "contextmenu", false, listener(|event| event.prevent_default()));
-    let w = weak.clone();
-    listeners.add(target, "dblclick", true, listener(move |_| with_state(&w, State::reset_camera)));
-    listeners
-}
-
-/// Keyboard shortcuts on the window: Space play/pause; ←/→ one frame back/forward (pauses);
-/// Shift+←/→ one second back/forward; Home/End first/last frame. Keys typed into form fields
-/// (and Space on a focused button) are left to the page.
-fn attach_window_listeners(weak: &Weak<RefCell<State>>) -> Listeners {
-    let mut listeners = Listeners::default();
-    let Some(window) = web_sys::window() else { return listeners };
-    let w = weak.clone();
-    listeners.add(
-        window.as_ref(),
-        "keydown",
-        false,
-        listener(move |event| {
-            let Some(e) = event.dyn_ref::<KeyboardEvent>() else { return };
-            if e.ctrl_key() || e.meta_key() || e.alt_key() || e.default_prevented() {
-                return;
-            }
-            let key = e.key();
-            let tag = e
-                .target()
-                .and_then(|t| t.dyn_into::<web_sys::HtmlElement>().ok())
-                .map(|el| (el.tag_name().to_ascii_uppercase(), el.is_content_editable()));
-            if let Some((tag, editable)) = &tag {
-                if *editable || matches!(tag.as_str(), "INPUT" | "TEXTAREA" | "SELECT") {
-                    return;
-                }
-                if tag == "BUTTON" && (key == " " || key == "Enter") {
-                    return;
-                }
-            }
-            let Some(state) = w.upgrade() else { return };
-            let handled = {
-                let Ok(mut s) = state.try_borrow_mut() else { return };
-                let last = s.playback.frames().saturating_sub(1) as f64;
-                let p = &mut s.playback;
-                let handled = match (key.as_str(), e.shift_key()) {
-                    (" ", _) => {
-                        p.toggle_play();
-                        true
-                    }
-                    ("ArrowLeft", false) => p.step(-1.0).is_ok(),
-                    ("ArrowRight", false) => p.step(1.0).is_ok(),
-                    ("ArrowLeft", true) => p.seek_by_seconds(-1.0).is_ok(),
-                    ("ArrowRight", true) => p.seek_by_seconds(1.0).is_ok(),
-                    ("Home", _) => p.seek(0.0).is_ok(),
-                    ("End", _) => p.seek(last).is_ok(),
-                    _ => false,
-                };
-                if handled {
-                    s.dirty = true;
-                }
-                handled
-            };
-            if handled {
-                e.prevent_default();
-                notify_frame(&state);
-            }
-        }),
-    );
-    listeners
 }
 
 #[wasm_bindgen]

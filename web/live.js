@@ -309,5 +309,29 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
     $('live-stop').addEventListener('click', () => stop(false));
   }
 
-  return { wire, join, onEvent };
+  // A copy of what the Live panel has seen, for the test surface (test-surface.js).
+  function snapshot() {
+    return {
+      frames: live.frames,
+      modes: [...live.modes],
+      devices: live.devices,
+      take: live.take,
+      kept: live.kept,
+      dropped: live.dropped,
+      closed: live.closed,
+      latencies: [...live.latencies],
+      computeMs: [...live.computeMs],
+      arrivals: [...live.arrivals],
+      posted: [...live.posted],
+      lastFrame: live.lastFrame,
+      scene: live.scene,
+    };
+  }
+
+  // Forgets the latency measurements (the live bench measures each lookahead afresh).
+  function resetMeasurements() {
+    for (const list of [live.latencies, live.computeMs, live.arrivals, live.posted]) list.length = 0;
+  }
+
+  return { wire, join, onEvent, snapshot, resetMeasurements };
 }

@@ -40,22 +40,19 @@ try {
     await app.page.selectOption('#live-lookahead', String(lookahead));
     await app.page.waitForTimeout(1500);
     const before = await app.page.evaluate(() => {
-      const l = window.egoexo.live;
-      l.latencies.length = 0;
-      l.computeMs.length = 0;
-      l.arrivals.length = 0;
-      l.posted.length = 0;
+      window.egoexo.live.resetMeasurements();
+      const l = window.egoexo.live.snapshot();
       return { frames: l.frames, skipped: l.take?.skipped ?? 0 };
     });
     await app.page.waitForTimeout(SECONDS * 1000);
     const after = await app.page.evaluate(() => {
-      const l = window.egoexo.live;
+      const l = window.egoexo.live.snapshot();
       return {
         frames: l.frames,
-        latencies: [...l.latencies],
-        arrivals: [...l.arrivals],
-        posted: [...l.posted],
-        compute: [...l.computeMs],
+        latencies: l.latencies,
+        arrivals: l.arrivals,
+        posted: l.posted,
+        compute: l.computeMs,
         lastLookahead: l.lastFrame?.lookahead,
         trained: l.lastFrame?.trained_for_lookahead,
       };

@@ -49,10 +49,10 @@ function egoexo(args) {
 }
 
 const live = (app) => app.page.evaluate(() => {
-  const l = window.egoexo.live;
+  const l = window.egoexo.live.snapshot();
   return {
     frames: l.frames,
-    modes: [...l.modes],
+    modes: l.modes,
     devices: l.devices,
     take: l.take,
     kept: l.kept,
@@ -266,7 +266,7 @@ describe('live capture', () => {
       // The wearer whose head streamed first is the one whose facts are shown.
       const wearers = shown.lastFrame.wearers;
       assert.deepEqual([...wearers].sort(), ['participant-1', 'participant-2']);
-      const scene = await app.page.evaluate(() => JSON.parse(new TextDecoder().decode(window.egoexo.live.scene)));
+      const scene = await app.page.evaluate(() => JSON.parse(new TextDecoder().decode(window.egoexo.live.snapshot().scene)));
       assert.equal(scene.participant.id, wearers[0]);
       assert.deepEqual(scene.others.map((o) => o.participant.id), [wearers[1]]);
       assert.match(await app.text('#live-mode'), /2 wearers drawn/);

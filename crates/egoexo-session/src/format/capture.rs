@@ -149,15 +149,7 @@ impl ManifestReader<'_> {
     fn participant(&mut self, v: &Value, path: &str) -> Result<Participant, ImportError> {
         let ctx = self.ctx;
         self.known_keys(v, path, keys::PARTICIPANT);
-        let id_path = join(path, "id");
-        let id = ctx.str(ctx.field(v, path, "id")?, &id_path)?.to_owned();
-        if !crate::validate::is_valid_observer_id(&id) {
-            return Err(ctx.invalid(
-                &id_path,
-                "a participant id of 1–64 characters from A–Z, a–z, 0–9, `.`, `_`, `-`",
-                ctx.field(v, path, "id")?,
-            ));
-        }
+        let id = self.id(v, path, "a participant")?;
         let reconstruct_path = join(path, "reconstruct");
         let reconstruct = ctx.field(v, path, "reconstruct")?;
         let reconstruct =

@@ -55,6 +55,23 @@ impl ManifestReader<'_> {
         }
     }
 
+    /// The `id` of the object at `path` (an observer's or a participant's, `what`): 1–64
+    /// characters from A–Z, a–z, 0–9, `.`, `_`, `-`.
+    pub(super) fn id(&self, v: &Value, path: &str, what: &str) -> Result<String, ImportError> {
+        let ctx = self.ctx;
+        let id_path = join(path, "id");
+        let value = ctx.field(v, path, "id")?;
+        let id = ctx.str(value, &id_path)?;
+        if !crate::validate::is_valid_observer_id(id) {
+            return Err(ctx.invalid(
+                &id_path,
+                format!("{what} id of 1–64 characters from A–Z, a–z, 0–9, `.`, `_`, `-`"),
+                value,
+            ));
+        }
+        Ok(id.to_owned())
+    }
+
     /// A data file named by the manifest: a safe relative path that exists.
     pub(super) fn data_path(&self, v: &Value, path: &str) -> Result<String, ImportError> {
         let raw = self.ctx.str(v, path)?;

@@ -198,15 +198,7 @@ impl ManifestReader<'_> {
     fn observer(&mut self, v: &Value, path: &str) -> Result<Observer, ImportError> {
         let ctx = self.ctx;
         self.known_keys(v, path, keys::OBSERVER);
-        let id_path = join(path, "id");
-        let id = ctx.str(ctx.field(v, path, "id")?, &id_path)?.to_owned();
-        if !crate::validate::is_valid_observer_id(&id) {
-            return Err(ctx.invalid(
-                &id_path,
-                "an observer id of 1–64 characters from A–Z, a–z, 0–9, `.`, `_`, `-`",
-                ctx.field(v, path, "id")?,
-            ));
-        }
+        let id = self.id(v, path, "an observer")?;
         let (head, placement) = self.poses_and_placement(v, path, "trajectory")?;
         let camera = self.camera(ctx.field(v, path, "camera")?, &join(path, "camera"))?;
         let keypoints = match ctx.optional(v, path, "keypoints")? {

@@ -14,7 +14,7 @@ pub const LAYERS: &[(&str, &[&str])] = &[
     ("egoexo-infer", &["egoexo-core"]),
     ("egoexo-solve", &["egoexo-core"]),
     ("egoexo-session", &["egoexo-core", "egoexo-protocol", "egoexo-motion-io", "egoexo-solve"]),
-    ("egoexo-mocap", &["egoexo-core", "egoexo-motion-io"]),
+    ("egoexo-mocap", &["egoexo-core", "egoexo-motion-io", "egoexo-solve"]),
     ("egoexo-server", &["egoexo-core", "egoexo-protocol"]),
     ("egoexo-synth", &["egoexo-core", "egoexo-session"]),
     ("egoexo-share", &["egoexo-core", "egoexo-motion-io", "egoexo-protocol", "egoexo-session"]),

@@ -58,6 +58,7 @@
 
 use egoexo_core::glam::{DMat3, DVec3, Mat3, Quat, Vec3};
 use egoexo_core::skeleton::{JOINT_NAMES, NUM_BODY_JOINTS, NUM_JOINTS, PARENTS, SkeletonError, SmplPose, SmplSkeleton};
+use egoexo_solve::dense::{outer_d, skew, solve_spd};
 use thiserror::Error;
 
 use crate::kinematics::{CmuBoneTransforms, CmuSkeleton};
@@ -680,54 +681,6 @@ const TORSO_PENALTY: TorsoPenalty = TorsoPenalty {
     soft_limit: 15.0 * std::f64::consts::PI / 180.0,
 };
 
-/// `[v]×`: the matrix with `[v]× · u = v × u`.
-fn skew(v: DVec3) -> DMat3 {
-    DMat3::from_cols(DVec3::new(0.0, v.z, -v.y), DVec3::new(-v.z, 0.0, v.x), DVec3::new(v.y, -v.x, 0.0))
-}
-
-fn outer_d(a: DVec3, b: DVec3) -> DMat3 {
-    DMat3::from_cols(a * b.x, a * b.y, a * b.z)
-}
-
-/// Solves `h · x = g` for a symmetric positive definite `h` (Cholesky, f64).
-fn solve_spd<const N: usize>(mut h: [[f64; N]; N], g: [f64; N]) -> Option<[f64; N]> {
-    for j in 0..N {
-        let mut d = h[j][j];
-        for k in 0..j {
-            d -= h[j][k] * h[j][k];
-        }
-        if d.is_nan() || d <= 0.0 {
-            return None;
-        }
-        let d = d.sqrt();
-        h[j][j] = d;
-        for i in (j + 1)..N {
-            let mut s = h[i][j];
-            for k in 0..j {
-                s -= h[i][k] * h[j][k];
-            }
-            h[i][j] = s / d;
-        }
-    }
-    let mut y = [0.0f64; N];
-    for i in 0..N {
-        let mut s = g[i];
-        for k in 0..i {
-            s -= h[i][k] * y[k];
-        }
-        y[i] = s / h[i][i];
-    }
-    let mut x = [0.0f64; N];
-    for i in (0..N).rev() {
-        let mut s = y[i];
-        for k in (i + 1)..N {
-            s -= h[k][i] * x[k];
-        }
-        x[i] = s / h[i][i];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
-}
-
 fn outer(a: Vec3, b: Vec3) -> Mat3 {
     Mat3::from_cols(a * b.x, a * b.y, a * b.z)
 }
@@ -768,25 +721,6 @@ mod tests {
         assert_eq!(ATTACHMENT[22], 16);
         assert_eq!(ATTACHMENT[10], 1);
         assert_eq!(ATTACHMENT[15], 15);
-    }
-
-    #[test]
-    fn solve_spd_solves_a_positive_definite_system() {
-        const N: usize = 6;
-        let m: [[f64; N]; N] = std::array::from_fn(|r| std::array::from_fn(|c| ((r * 7 + c * 3) % 5) as f64 - 2.0));
-        let mut h = [[0.0; N]; N];
-        for r in 0..N {
-            for c in 0..N {
-                h[r][c] = (0..N).map(|k| m[k][r] * m[k][c]).sum::<f64>() + if r == c { 0.5 } else { 0.0 };
-            }
-        }
-        let x: [f64; N] = std::array::from_fn(|i| i as f64 - 2.5);
-        let g: [f64; N] = std::array::from_fn(|r| (0..N).map(|c| h[r][c] * x[c]).sum());
-        let solved = solve_spd(h, g).unwrap();
-        for i in 0..N {
-            assert!((solved[i] - x[i]).abs() < 1e-9, "{solved:?}");
-        }
-        assert_eq!(solve_spd([[0.0; N]; N], g), None);
     }
 
     #[test]

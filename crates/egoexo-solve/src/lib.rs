@@ -4,6 +4,9 @@
 //!   tens of unknowns, many residuals), with robust losses ([`robust`]) applied by
 //!   iteratively reweighting, and the covariance of its solution (model-based and
 //!   cluster-robust).
+//! - [`dense`] — fixed-size Gauss–Newton algebra over a body's joints (cross and outer
+//!   matrices, a Cholesky solve of a few unknowns without allocating), used by the CMU
+//!   retargeting.
 //! - [`geometry`] — the few f64 rotation helpers the solvers share (yaw about +Y, skew
 //!   matrices, the nearest rotation), and conversions from the core's f32 types.
 //! - [`registration`] — which transform (and clock offset, and focal length) puts an
@@ -16,6 +19,7 @@
 //! Nothing here does I/O, spawns threads or reads the clock: the same code runs in the
 //! browser's worker. Numerics are f64 throughout.
 
+pub mod dense;
 pub mod geometry;
 pub mod lsq;
 pub mod registration;

@@ -9,24 +9,27 @@ use anyhow::{Context, Result};
 use crate::cmd::{self, TestCounts};
 use crate::{e2e, tools, web};
 
-/// Crates whose tests also run compiled to wasm32 in headless Chromium.
-const WASM_TEST_CRATES: &[&str] = &["egoexo-core", "egoexo-video"];
-
-/// Crates whose tests run compiled to wasm32 in headless Chromium with the web app's profile
-/// ([`web::WASM_PROFILE`]) and the features of the app's own build of that crate, so that the
-/// tests and the app share one compiled wgpu.
+/// Every wasm test build uses the web app's profile ([`web::WASM_PROFILE`]): one compiled copy
+/// of the shared dependencies (serde, glam, zip, tract, wgpu, …) serves the tests and `dist/`,
+/// instead of a debug copy for some tests and an optimised one for the rest. The app's own
+/// crates build first, so the smaller crates' tests after them only add what differs.
+///
+/// Crates whose tests run compiled to wasm32 in headless Chromium with the features of the
+/// app's own build of that crate, so that the tests and the app share one compiled wgpu.
 const WASM_APP_PROFILE_TEST_CRATES: &[&str] = &["egoexo-viewer"];
 
-/// Single test targets (crate, test) that run compiled to wasm32 in headless Chromium, for
-/// crates whose other tests need native I/O.
-const WASM_TEST_TARGETS: &[(&str, &str)] = &[("egoexo-motion-io", "export_wasm"), ("egoexo-session", "import_wasm")];
-
-/// Test targets (crate, test) that run in headless Chromium built with the web app's profile
-/// ([`web::WASM_PROFILE`]), so they reuse the app's compiled dependencies (tract). They build in
-/// one cargo invocation: the dependency features are then the union over these crates, which
-/// is what the worker module's own build resolves to, so nothing is compiled twice.
+/// Test targets (crate, test) of the app's crates. They build in one cargo invocation: the
+/// dependency features are then the union over these crates, which is what the worker
+/// module's own build resolves to, so nothing is compiled twice.
 const WASM_APP_PROFILE_TEST_TARGETS: &[(&str, &str)] =
     &[("egoexo-web-worker", "worker_wasm"), ("egoexo-infer", "parity_wasm")];
+
+/// Crates whose tests all run compiled to wasm32 too (after the app's).
+const WASM_TEST_CRATES: &[&str] = &["egoexo-core", "egoexo-video"];
+
+/// Single test targets (crate, test) that run compiled to wasm32, for crates whose other tests
+/// need native I/O.
+const WASM_TEST_TARGETS: &[(&str, &str)] = &[("egoexo-motion-io", "export_wasm"), ("egoexo-session", "import_wasm")];
 
 /// Timed reconstructions of the bench page during `cargo xtask test` (a figure, not a check).
 const TEST_BENCH_RUNS: u32 = 3;
@@ -112,67 +115,104 @@ fn warn_if_disk_low(root: &Path) {
 pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
     warn_if_disk_low(root);
     let mut phases = Phases::default();
-    // Install first, so a missing tool fails fast rather than after the native tests.
-    let (browser, native_tools) = phases.time("tools (install or check)", || {
-        let browser = if wasm { Some(tools::ensure_browser_test_tools(root)?) } else { None };
-        // The Node packages are needed by the exporter tests and by the app's browser tests.
-        let native_tools = if native || wasm { Some(tools::ensure_native_test_tools(root)?) } else { None };
-        Ok((browser, native_tools))
-    })?;
+    // The downloads (pip's wheels, npm's packages, Debian's Chromium: network and disk) run
+    // beside the CPU-bound work (building wasm-bindgen-test-runner, then the native tests), so
+    // a fresh machine waits for whichever is longer instead of both. A missing tool still
+    // fails before any test runs.
+    let (browser, native_tools) =
+        phases.time("tools (downloads) beside the builds of the test runner and native tests", || {
+            std::thread::scope(|scope| {
+                let downloads = scope.spawn(|| -> Result<_> {
+                    // The Node packages are needed by the exporter tests and by the app's browser tests.
+                    let native_tools = if native || wasm { Some(tools::ensure_native_test_tools(root)?) } else { None };
+                    let chromium = if wasm { Some(tools::ensure_chromium()?) } else { None };
+                    Ok((native_tools, chromium))
+                });
+                let runner = if wasm { Some(tools::ensure_wasm_test_runner(root)) } else { None };
+                let built = if native {
+                    cmd::run(Command::new("cargo").args(["test", "--workspace", "--no-run", "--quiet"]))
+                } else {
+                    Ok(())
+                };
+                let (native_tools, chromium) =
+                    downloads.join().map_err(|_| anyhow::anyhow!("the tool downloads panicked"))??;
+                built?;
+                let browser = match (runner.transpose()?, chromium) {
+                    (Some(wasm_bindgen_test_runner), Some((chromium, chromedriver))) => {
+                        Some(tools::BrowserTestTools { wasm_bindgen_test_runner, chromium, chromedriver })
+                    }
+                    _ => None,
+                };
+                Ok((browser, native_tools))
+            })
+        })?;
 
-    let native_counts = match (&native_tools, native) {
-        // The exporter tests read their files back with numpy, bvhio and gltf-validator.
-        (Some(t), true) => Some(phases.time("native tests (cargo test --workspace)", || {
-            cmd::run_tests(
-                Command::new("cargo")
-                    .args(["test", "--workspace"])
-                    .env("EGOEXO_PYTHON", &t.python)
-                    .env("EGOEXO_NODE_MODULES", &t.node_modules),
-            )
-        })?),
-        _ => None,
+    // The wasm selections, each one `cargo test` invocation, the app's crates first.
+    let app_crates = WASM_APP_PROFILE_TEST_CRATES.iter().map(|krate| vec!["--package", *krate]);
+    let app_targets = std::iter::once(
+        WASM_APP_PROFILE_TEST_TARGETS
+            .iter()
+            .flat_map(|(krate, _)| ["--package", *krate])
+            .chain(WASM_APP_PROFILE_TEST_TARGETS.iter().flat_map(|(_, test)| ["--test", *test]))
+            .collect::<Vec<_>>(),
+    );
+    let crates = WASM_TEST_CRATES.iter().map(|krate| vec!["--package", *krate]);
+    let targets = WASM_TEST_TARGETS.iter().map(|(krate, test)| vec!["--package", *krate, "--test", *test]);
+    let wasm_selections: Vec<Vec<&str>> = app_crates.chain(app_targets).chain(crates).chain(targets).collect();
+    let wasm_env = match &browser {
+        Some(t) => Some(WasmTestEnv { tools: t.clone(), webdriver_json: write_webdriver_json(root, &t.chromium)? }),
+        None => None,
     };
 
-    let wasm_counts = match &browser {
-        Some(t) => {
-            let webdriver_json = write_webdriver_json(root, &t.chromium)?;
-            let mut total = TestCounts::default();
-            let crates = WASM_TEST_CRATES.iter().map(|krate| vec!["--package", krate]);
-            let targets = WASM_TEST_TARGETS.iter().map(|(krate, test)| vec!["--package", krate, "--test", test]);
-            let app_crates = WASM_APP_PROFILE_TEST_CRATES
-                .iter()
-                .map(|krate| vec!["--profile", web::WASM_PROFILE, "--package", krate]);
-            let app_targets = std::iter::once(
-                ["--profile", web::WASM_PROFILE]
-                    .into_iter()
-                    .chain(WASM_APP_PROFILE_TEST_TARGETS.iter().flat_map(|(krate, _)| ["--package", krate]))
-                    .chain(WASM_APP_PROFILE_TEST_TARGETS.iter().flat_map(|(_, test)| ["--test", test]))
-                    .collect::<Vec<_>>(),
-            );
-            for selection in crates.chain(targets).chain(app_crates).chain(app_targets) {
-                let name = format!("wasm tests: {}", selection.join(" "));
-                let counts = phases.time(name, || {
-                    cmd::run_tests(
+    // The wasm test builds and `dist/` compile while the native tests run: a test binary with
+    // one long test leaves a core idle, and the wasm builds lock another profile's folder. The
+    // browsers start only once the native tests are done.
+    let (native_counts, built_app) =
+        phases.time("native tests, with the wasm test builds and dist/ beside them", || {
+            std::thread::scope(|scope| {
+                let wasm_build = wasm_env.as_ref().map(|env| {
+                    let selections = &wasm_selections;
+                    scope.spawn(move || -> Result<Vec<web::ModuleSize>> {
+                        for selection in selections {
+                            cmd::run(env.cargo_test(selection).arg("--no-run"))?;
+                        }
+                        // The tests' build (profile wasm-release, whose dependencies the wasm
+                        // tests just compiled); the shipped LTO build would compile them all again.
+                        let models = web::models_dir(root, None)?;
+                        web::build_dist(root, &models, web::WasmBuild::Tests, web::WasmOpt::Off)
+                    })
+                });
+                let native_counts = match (&native_tools, native) {
+                    // The exporter tests read their files back with numpy, bvhio and gltf-validator.
+                    (Some(t), true) => Some(cmd::run_tests(
                         Command::new("cargo")
-                            .arg("test")
-                            .args(&selection)
-                            .args(["--target", "wasm32-unknown-unknown"])
-                            .env("CARGO_TARGET_WASM32_UNKNOWN_UNKNOWN_RUNNER", &t.wasm_bindgen_test_runner)
-                            .env("CHROMEDRIVER", &t.chromedriver)
-                            .env("WASM_BINDGEN_TEST_WEBDRIVER_JSON", &webdriver_json)
-                            .env("WASM_BINDGEN_TEST_TIMEOUT", "300"),
-                    )
-                })?;
+                            .args(["test", "--workspace"])
+                            .env("EGOEXO_PYTHON", &t.python)
+                            .env("EGOEXO_NODE_MODULES", &t.node_modules),
+                    )),
+                    _ => None,
+                };
+                let built_app = wasm_build
+                    .map(|handle| handle.join().map_err(|_| anyhow::anyhow!("the wasm builds panicked"))?)
+                    .transpose();
+                Ok((native_counts.transpose()?, built_app?))
+            })
+        })?;
+
+    let wasm_counts = match (&wasm_env, built_app) {
+        (Some(env), Some(sizes)) => {
+            let mut total = TestCounts::default();
+            for selection in &wasm_selections {
+                let name = format!("wasm tests: {}", selection.join(" "));
+                let counts = phases.time(name, || cmd::run_tests(&mut env.cargo_test(selection)))?;
                 total.passed += counts.passed;
                 total.failed += counts.failed;
                 total.ignored += counts.ignored;
             }
-            // Last, as it needs the models: the app, built with the profile (and so the
-            // dependencies) the app-profile tests just used.
-            let app = run_web_app(root, t, &mut phases)?;
+            let app = run_web_app(root, &env.tools, sizes, &mut phases)?;
             Some((total, app))
         }
-        None => None,
+        _ => None,
     };
 
     println!();
@@ -275,15 +315,14 @@ struct WebAppRun {
     hour: Option<serde_json::Value>,
 }
 
-/// Builds `dist/` (models from `models/` or `EGOEXO_MODELS`), then runs the Playwright suite
-/// and the bench page against it.
-fn run_web_app(root: &Path, t: &tools::BrowserTestTools, phases: &mut Phases) -> Result<WebAppRun> {
-    let models = web::models_dir(root, None)?;
-    // The tests' build (profile wasm-release, whose dependencies the wasm tests just
-    // compiled); the shipped LTO build would compile them all again.
-    let sizes = phases.time("web app: dist/ (both modules, wasm-bindgen)", || {
-        web::build_dist(root, &models, web::WasmBuild::Tests, web::WasmOpt::Off)
-    })?;
+/// Runs the Playwright suite and the bench page against `dist/` (built beside the native
+/// tests, with the models from `models/` or `EGOEXO_MODELS`; `sizes` are its modules').
+fn run_web_app(
+    root: &Path,
+    t: &tools::BrowserTestTools,
+    sizes: Vec<web::ModuleSize>,
+    phases: &mut Phases,
+) -> Result<WebAppRun> {
     let run = e2e::BrowserRun { chromium: t.chromium.clone(), out: root.join("target").join("e2e") };
     let e2e = phases.time("web app: end to end (Playwright)", || e2e::run_suite(root, &run))?;
     let bench = phases.time("web app: bench page", || e2e::run_bench(root, &run, TEST_BENCH_RUNS))?;
@@ -294,6 +333,29 @@ fn run_web_app(root: &Path, t: &tools::BrowserTestTools, phases: &mut Phases) ->
         std::fs::read(run.out.join("first-skeleton.json")).ok().and_then(|bytes| serde_json::from_slice(&bytes).ok());
     let hour = std::fs::read(run.out.join("hour.json")).ok().and_then(|bytes| serde_json::from_slice(&bytes).ok());
     Ok(WebAppRun { sizes, e2e, bench, live, relay, first_skeleton, hour })
+}
+
+/// What a wasm `cargo test` needs: the runner, the browser and its capabilities file.
+struct WasmTestEnv {
+    tools: tools::BrowserTestTools,
+    webdriver_json: std::path::PathBuf,
+}
+
+impl WasmTestEnv {
+    /// `cargo test` of `selection` for wasm32 in the app's profile, run in headless Chromium.
+    /// The build (`--no-run`) and the run get the same environment, so the run rebuilds nothing.
+    fn cargo_test(&self, selection: &[&str]) -> Command {
+        let mut c = Command::new("cargo");
+        c.arg("test")
+            .args(["--profile", web::WASM_PROFILE])
+            .args(selection)
+            .args(["--target", "wasm32-unknown-unknown"])
+            .env("CARGO_TARGET_WASM32_UNKNOWN_UNKNOWN_RUNNER", &self.tools.wasm_bindgen_test_runner)
+            .env("CHROMEDRIVER", &self.tools.chromedriver)
+            .env("WASM_BINDGEN_TEST_WEBDRIVER_JSON", &self.webdriver_json)
+            .env("WASM_BINDGEN_TEST_TIMEOUT", "300");
+        c
+    }
 }
 
 /// The WebDriver capabilities file: Debian's Chromium binary and the flags it needs here.

@@ -18,10 +18,16 @@ pub struct BrowserTestTools {
 
 /// Ensures every tool is present (installing what it can) and returns their paths.
 pub fn ensure_browser_test_tools(root: &Path) -> Result<BrowserTestTools> {
-    ensure_wasm_target()?;
-    let wasm_bindgen_test_runner = ensure_wasm_bindgen_cli(root)?;
+    let wasm_bindgen_test_runner = ensure_wasm_test_runner(root)?;
     let (chromium, chromedriver) = ensure_chromium()?;
     Ok(BrowserTestTools { wasm_bindgen_test_runner, chromium, chromedriver })
+}
+
+/// The wasm32 target and the `wasm-bindgen-test-runner` matching Cargo.lock (built from
+/// crates.io when missing: CPU-bound, several minutes); its path.
+pub fn ensure_wasm_test_runner(root: &Path) -> Result<PathBuf> {
+    ensure_wasm_target()?;
+    ensure_wasm_bindgen_cli(root)
 }
 
 const WASM_TARGET: &str = "wasm32-unknown-unknown";
@@ -79,7 +85,7 @@ fn ensure_wasm_bindgen_cli(root: &Path) -> Result<PathBuf> {
     Ok(runner)
 }
 
-fn ensure_chromium() -> Result<(PathBuf, PathBuf)> {
+pub fn ensure_chromium() -> Result<(PathBuf, PathBuf)> {
     let find = || (find_on_path("chromium").or_else(|| find_on_path("chromium-browser")), find_on_path("chromedriver"));
     if let (Some(chromium), Some(driver)) = find() {
         return Ok((chromium, driver));

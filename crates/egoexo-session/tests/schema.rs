@@ -1,5 +1,7 @@
 //! `docs/session-format.md` is true: its JSON Schema accepts its example and every manifest
-//! the writer produces, rejects broken ones, and the example reads.
+//! the writer produces, rejects broken ones, and the example reads. Native only (the
+//! validator is a native dev-dependency).
+#![cfg(not(target_arch = "wasm32"))]
 
 mod support;
 

@@ -39,6 +39,8 @@ use egoexo_core::glam::Vec3;
 use egoexo_core::skeleton::DEFAULT_HEAD_JOINT_IN_HEAD_DEVICE;
 
 use super::ImportOptions;
+pub use super::folder_files::PLACEMENT_FILE;
+use super::folder_files::{read_observer_keypoints, read_placement_file, read_subject_json};
 use crate::aria::calibration::{CalibrationRecord, RGB_LABEL, middle_record_with, read_online_calibration};
 use crate::aria::hand_tracking::{
     HAND_TRACKING_DIR, HAND_TRACKING_RESULTS_FILE, HandTracking, Side, WRIST_AND_PALM_FILE, read_hand_tracking,
@@ -52,10 +54,7 @@ use crate::capture::spread_fixed_poses;
 use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
 use crate::floor::{Floor, floor_from_points};
 use crate::format::{STATIC_CAMERA_FILE, read_static_camera};
-use crate::json::JsonCtx;
-use crate::keypoints::read_keypoints;
 use crate::model::{Observer, Session, SubjectInfo, Trajectory, VideoRef, Wearer, WristSource};
-use crate::placement::{Mount, Placement};
 use crate::vfs::FileTree;
 
 /// File name of an MPS closed-loop trajectory.
@@ -721,87 +720,4 @@ pub fn import_multi_device(
     let mut session = Session { name: name.to_owned(), wearer, observers, subject, ground_truth: None, floor };
     spread_fixed_poses(&mut session);
     Ok((session, warnings))
-}
-
-/// File name of an observer folder's placement (its world and clock against the wearer's).
-pub const PLACEMENT_FILE: &str = "placement.json";
-
-/// An observer folder's [`PLACEMENT_FILE`] (`{"world": "own"}`, …; the `.egoexo` placement's
-/// fields), or the default placement (the wearer's world and clock) without one.
-pub(crate) fn read_placement_file(folder: &FileTree) -> Result<Placement, ImportError> {
-    if !folder.contains(PLACEMENT_FILE) {
-        return Ok(Placement::default());
-    }
-    let file = folder.display_path(PLACEMENT_FILE);
-    let doc = JsonCtx::file(&file).parse(&folder.read_text(PLACEMENT_FILE)?)?;
-    let placement: Placement = serde_json::from_value(doc.clone()).map_err(|e| {
-        ImportError::invalid(
-            &file,
-            Location::File,
-            format!("a placement {{world: shared|own, gravity, clock: shared|own, focal_known}} ({e})"),
-            doc.to_string().chars().take(120).collect::<String>(),
-        )
-    })?;
-    if placement.mount == Mount::Fixed {
-        return Err(ImportError::invalid(
-            &file,
-            Location::Field("mount".into()),
-            format!("`worn` for an MPS device folder (a static camera has a {STATIC_CAMERA_FILE})"),
-            "`fixed`",
-        ));
-    }
-    Ok(placement)
-}
-
-/// `keypoints.jsonl` or `keypoints.json` in an observer's folder, if any.
-pub(crate) fn read_observer_keypoints(
-    dir: &FileTree,
-    id: &str,
-    options: &ImportOptions,
-    start_ns: i64,
-    warnings: &mut Vec<ImportWarning>,
-) -> Result<Option<crate::model::KeypointTrack>, ImportError> {
-    let candidates: Vec<&str> = ["keypoints.jsonl", "keypoints.json"].into_iter().filter(|f| dir.contains(f)).collect();
-    let Some(&file) = candidates.first() else { return Ok(None) };
-    if candidates.len() > 1 {
-        warnings.push(ImportWarning {
-            file: dir.display_path("keypoints.json"),
-            message: "ignored: keypoints.jsonl is used".into(),
-        });
-    }
-    let display = dir.display_path(file);
-    let (track, more) = read_keypoints(&display, &dir.read_text(file)?, id, options.coco, start_ns)?;
-    warnings.extend(more);
-    Ok(Some(track))
-}
-
-/// `subject.json`: `{"height_m": 1.78, "betas": [..]}` (both optional).
-pub(crate) fn read_subject_json(file: &str, text: &str) -> Result<SubjectInfo, ImportError> {
-    let ctx = JsonCtx::file(file);
-    let doc = ctx.parse(text)?;
-    let height_m = match ctx.optional(&doc, "", "height_m")? {
-        Some(v) => Some(ctx.f32(v, "height_m")?),
-        None => None,
-    };
-    let betas = match ctx.optional(&doc, "", "betas")? {
-        Some(v) => {
-            let items = ctx.array(v, "betas")?;
-            if items.is_empty() || items.len() > 300 {
-                return Err(ctx.invalid("betas", "1 to 300 SMPL shape coefficients", v));
-            }
-            Some(items.iter().enumerate().map(|(i, b)| ctx.f32(b, &format!("betas[{i}]"))).collect::<Result<_, _>>()?)
-        }
-        None => None,
-    };
-    if let Some(h) = height_m
-        && !crate::validate::STATURE_RANGE_M.contains(&h)
-    {
-        return Err(ImportError::invalid(
-            file,
-            Location::Field("height_m".into()),
-            "a stature in metres within 0.5..=2.7",
-            h.to_string(),
-        ));
-    }
-    Ok(SubjectInfo { height_m, betas, rest_joints: None })
 }

@@ -13,6 +13,7 @@
 //! ([`crate::validate`]).
 
 pub mod aria_mps;
+mod folder_files;
 pub mod nymeria;
 
 use crate::aria::trajectory::Clock;

@@ -16,6 +16,7 @@ use egoexo_synth::group::{GroupConfig, group_walk, simulate_group};
 use serde::{Deserialize, Serialize};
 
 use crate::DatasetError;
+use crate::table::{Align, Column, markdown_table};
 
 /// One group scene to simulate and score.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -168,38 +169,32 @@ pub fn evaluate_group(
 
 /// The two tables: association per scene, MPJPE per participant (plus the mean per method).
 pub fn format_group_table(report: &GroupReport) -> String {
-    let mut out = String::from(
-        "| participants | bystanders | seed | participant detections | right | wrong participant | missed | bystander detections | taken for a participant | association error rate |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
-    );
-    for r in &report.association {
-        out += &format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.3} |\n",
-            r.participants,
-            r.bystanders,
-            r.seed,
-            r.participant_detections,
-            r.right,
-            r.wrong_participant,
-            r.missed,
-            r.bystander_detections,
-            r.bystanders_taken,
-            r.error_rate()
-        );
-    }
-    out += "\n| participants | seed | participant | frames | MPJPE ego-only (cm) | ego-exo, associated | ego-exo, true identities | frames with exo evidence |\n|---:|---:|---|---:|---:|---:|---:|---:|\n";
-    for r in &report.participants {
-        out += &format!(
-            "| {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {} |\n",
-            r.participants,
-            r.seed,
-            r.participant,
-            r.frames,
-            r.ego_only_mpjpe_cm,
-            r.ego_exo_mpjpe_cm,
-            r.true_identities_mpjpe_cm,
-            r.exo_evidence_frames
-        );
-    }
+    use Align::{Left, Right};
+    let association: [Column<AssociationRow>; 10] = [
+        ("participants", Right, |r| r.participants.to_string()),
+        ("bystanders", Right, |r| r.bystanders.to_string()),
+        ("seed", Right, |r| r.seed.to_string()),
+        ("participant detections", Right, |r| r.participant_detections.to_string()),
+        ("right", Right, |r| r.right.to_string()),
+        ("wrong participant", Right, |r| r.wrong_participant.to_string()),
+        ("missed", Right, |r| r.missed.to_string()),
+        ("bystander detections", Right, |r| r.bystander_detections.to_string()),
+        ("taken for a participant", Right, |r| r.bystanders_taken.to_string()),
+        ("association error rate", Right, |r| format!("{:.3}", r.error_rate())),
+    ];
+    let participants: [Column<ParticipantRow>; 8] = [
+        ("participants", Right, |r| r.participants.to_string()),
+        ("seed", Right, |r| r.seed.to_string()),
+        ("participant", Left, |r| r.participant.clone()),
+        ("frames", Right, |r| r.frames.to_string()),
+        ("MPJPE ego-only (cm)", Right, |r| format!("{:.2}", r.ego_only_mpjpe_cm)),
+        ("ego-exo, associated", Right, |r| format!("{:.2}", r.ego_exo_mpjpe_cm)),
+        ("ego-exo, true identities", Right, |r| format!("{:.2}", r.true_identities_mpjpe_cm)),
+        ("frames with exo evidence", Right, |r| r.exo_evidence_frames.to_string()),
+    ];
+    let mut out = markdown_table(&association, &report.association);
+    out += "\n";
+    out += &markdown_table(&participants, &report.participants);
     let n = report.participants.len().max(1) as f64;
     let mean = |f: fn(&ParticipantRow) -> f64| report.participants.iter().map(f).sum::<f64>() / n;
     out += &format!(

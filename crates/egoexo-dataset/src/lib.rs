@@ -13,6 +13,7 @@ pub mod eval;
 pub mod group;
 pub mod registration;
 pub mod shards;
+mod table;
 
 use thiserror::Error;
 

@@ -142,6 +142,42 @@ impl DeviceWorld {
     }
 }
 
+/// How a device is carried.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DeviceMount {
+    /// On a person (glasses, a headset, a phone in the hand): it streams its head pose.
+    #[default]
+    Worn,
+    /// A static camera that knows nothing of its pose (a phone on a stand, a laptop's webcam):
+    /// it publishes keypoints only, no head; viewers place it by registration in 6 DoF (it
+    /// knows no gravity either), at one fixed pose in a world of its own (its device frame).
+    Fixed,
+}
+
+impl DeviceMount {
+    /// `worn` (the default, left out of the JSON).
+    pub fn is_worn(&self) -> bool {
+        *self == DeviceMount::Worn
+    }
+
+    /// Its name on the wire (`worn`, `fixed`).
+    pub fn name(self) -> &'static str {
+        match self {
+            DeviceMount::Worn => "worn",
+            DeviceMount::Fixed => "fixed",
+        }
+    }
+}
+
+fn is_true(b: &bool) -> bool {
+    *b
+}
+
+fn yes() -> bool {
+    true
+}
+
 /// How a client proves it may be in a room.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(untagged)]
@@ -205,6 +241,46 @@ pub struct DeviceHello {
     /// version 1: absent means `shared`.)
     #[serde(default, skip_serializing_if = "DeviceWorld::is_shared")]
     pub world: DeviceWorld,
+    /// Worn, or a static camera without a pose (publishes no `head`). (Added within version 1:
+    /// absent means `worn`.)
+    #[serde(default, skip_serializing_if = "DeviceMount::is_worn")]
+    pub mount: DeviceMount,
+    /// Whether its calibration's focal length is measured (`true`, the default) or a guess (a
+    /// browser camera that reports no field of view): registration then estimates it. (Added
+    /// within version 1.)
+    #[serde(default = "yes", skip_serializing_if = "is_true")]
+    pub focal_known: bool,
+}
+
+impl DeviceHello {
+    /// A device worn in the room's shared world with a known focal length (the defaults of
+    /// every field added within version 1), no target.
+    pub fn worn(id: impl Into<String>, role: DeviceRole, streams: Vec<Stream>) -> Self {
+        Self {
+            id: id.into(),
+            role,
+            streams,
+            target: None,
+            world: DeviceWorld::Shared,
+            mount: DeviceMount::Worn,
+            focal_known: true,
+        }
+    }
+
+    /// Why the relay refuses this hello's streams, if it does: a role publishing what it may
+    /// not, or a static camera publishing a head pose it does not have.
+    pub fn refused_stream(&self) -> Option<String> {
+        if let Some(stream) = self.streams.iter().find(|s| !self.role.allows(**s)) {
+            return Some(format!("a {} may not publish {}", self.role.name(), stream.name()));
+        }
+        if self.mount == DeviceMount::Fixed && self.streams.contains(&Stream::Head) {
+            return Some(
+                "a fixed camera (\"mount\": \"fixed\") publishes no head poses; a worn device leaves `mount` out"
+                    .into(),
+            );
+        }
+        None
+    }
 }
 
 /// Client → relay (JSON text frames).
@@ -235,6 +311,28 @@ pub struct ChannelInfo {
     /// The device's world ([`DeviceHello::world`]).
     #[serde(default, skip_serializing_if = "DeviceWorld::is_shared")]
     pub world: DeviceWorld,
+    /// The device's mount ([`DeviceHello::mount`]).
+    #[serde(default, skip_serializing_if = "DeviceMount::is_worn")]
+    pub mount: DeviceMount,
+    /// Whether the device's focal length is measured ([`DeviceHello::focal_known`]).
+    #[serde(default = "yes", skip_serializing_if = "is_true")]
+    pub focal_known: bool,
+}
+
+impl ChannelInfo {
+    /// Channel `channel`: stream `stream` of the device that said `hello`.
+    pub fn of(channel: u16, hello: &DeviceHello, stream: Stream) -> Self {
+        Self {
+            channel,
+            device: hello.id.clone(),
+            role: hello.role,
+            stream,
+            target: hello.target.clone(),
+            world: hello.world,
+            mount: hello.mount,
+            focal_known: hello.focal_known,
+        }
+    }
 }
 
 /// A device, as the relay sees it.
@@ -765,13 +863,7 @@ mod tests {
         let hello = ClientMessage::Hello {
             protocol: LIVE_PROTOCOL_VERSION,
             join: Join::Code { code: "7KQ-M4T".into() },
-            device: Some(DeviceHello {
-                id: "wearer".into(),
-                role: DeviceRole::Wearer,
-                streams: vec![Stream::Head],
-                target: None,
-                world: DeviceWorld::Shared,
-            }),
+            device: Some(DeviceHello::worn("wearer", DeviceRole::Wearer, vec![Stream::Head])),
         };
         let json = serde_json::to_value(&hello).unwrap();
         assert_eq!(
@@ -798,5 +890,30 @@ mod tests {
             serde_json::from_str::<DeviceHello>(r#"{"id":"a","role":"wearer","streams":[],"world":"mars"}"#).is_err()
         );
         assert!(valid_device_id("observer-1") && !valid_device_id("<b>") && !valid_device_id(""));
+    }
+
+    #[test]
+    fn a_fixed_camera_says_so_and_publishes_no_head() {
+        let json = r#"{"id":"webcam","role":"observer","streams":["keypoints"],"world":"own","mount":"fixed","focal_known":false}"#;
+        let hello: DeviceHello = serde_json::from_str(json).unwrap();
+        assert_eq!((hello.mount, hello.focal_known), (DeviceMount::Fixed, false));
+        assert_eq!(hello.refused_stream(), None);
+        assert_eq!(serde_json::to_string(&hello).unwrap(), json);
+        // Absent fields are a worn device with a measured focal length, and are left out.
+        let worn = DeviceHello::worn("glasses", DeviceRole::Observer, vec![Stream::Head, Stream::Keypoints]);
+        assert_eq!(
+            serde_json::from_str::<DeviceHello>(r#"{"id":"glasses","role":"observer","streams":["head","keypoints"]}"#)
+                .unwrap(),
+            worn
+        );
+        assert!(!serde_json::to_string(&worn).unwrap().contains("mount"));
+        let with_head = DeviceHello { mount: DeviceMount::Fixed, ..worn };
+        assert!(with_head.refused_stream().unwrap().contains("no head poses"));
+        let wearer_keypoints = DeviceHello::worn("w", DeviceRole::Wearer, vec![Stream::Keypoints]);
+        assert!(wearer_keypoints.refused_stream().unwrap().contains("may not publish"));
+        assert!(
+            serde_json::from_str::<DeviceHello>(r#"{"id":"a","role":"observer","streams":[],"mount":"tripod"}"#)
+                .is_err()
+        );
     }
 }

@@ -31,7 +31,7 @@ use egoexo_core::ego_features::TrackingMode;
 use egoexo_infer::Engine;
 use egoexo_session::model::{KeypointTrack, Observer, Session, Trajectory};
 use egoexo_session::placement::{Placement, WorldRef};
-use egoexo_solve::registration::{Registration, RegistrationStatus};
+use egoexo_solve::registration::{Dof, Registration, RegistrationStatus};
 use serde::{Deserialize, Serialize};
 
 use crate::{RegisterMode, RegisterSettings, apply_registration, register_session};
@@ -381,7 +381,13 @@ fn consistent(a: &Registration, b: &Registration) -> bool {
         yaw = 360.0 - yaw;
     }
     let moved = a.transform.translation.distance(b.transform.translation) as f64;
+    // In 6 DoF (a static camera that knows no gravity) the whole rotation must agree, not
+    // only the yaw.
+    let turned = a.transform.rotation.angle_between(b.transform.rotation).to_degrees() as f64;
+    let rotation_agrees = a.dof == Dof::Four && b.dof == Dof::Four
+        || turned <= 3.0 * combined(a.sigma_rotation_deg, b.sigma_rotation_deg) + 1.0;
     yaw <= 3.0 * combined(a.sigma_yaw_deg, b.sigma_yaw_deg) + 1.0
+        && rotation_agrees
         && moved <= 3.0 * combined(a.sigma_translation_m, b.sigma_translation_m) + 0.05
 }
 

@@ -12,8 +12,8 @@ use egoexo_core::exo_keypoints::Keypoint2d;
 use egoexo_core::glam::{Quat, Vec2, Vec3};
 use egoexo_core::rigid::RigidTransform;
 use egoexo_protocol::live::{
-    ChannelInfo, ClientMessage, CloseKind, DataFrame, DeviceHello, DeviceRole, DeviceStatus, DeviceWorld, FramePayload,
-    Join, LIVE_PROTOCOL_VERSION, LIVE_SUBPROTOCOL, MAX_MESSAGE_BYTES, RelayMessage, RoomCreated, Stream,
+    ChannelInfo, ClientMessage, CloseKind, DataFrame, DeviceHello, DeviceMount, DeviceRole, DeviceStatus, DeviceWorld,
+    FramePayload, Join, LIVE_PROTOCOL_VERSION, LIVE_SUBPROTOCOL, MAX_MESSAGE_BYTES, RelayMessage, RoomCreated, Stream,
 };
 use egoexo_server::{ApiLimits, LiveLimits, LiveState, Server, ServerOptions};
 use futures::{SinkExt, StreamExt};
@@ -246,13 +246,7 @@ fn device_hello(join: Join, id: &str, role: DeviceRole, streams: &[Stream]) -> C
     ClientMessage::Hello {
         protocol: LIVE_PROTOCOL_VERSION,
         join,
-        device: Some(DeviceHello {
-            id: id.into(),
-            role,
-            streams: streams.to_vec(),
-            target: None,
-            world: Default::default(),
-        }),
+        device: Some(DeviceHello::worn(id, role, streams.to_vec())),
     }
 }
 
@@ -520,11 +514,8 @@ async fn hostile_clients_are_closed_with_a_reason_and_the_others_carry_on() {
             protocol: LIVE_PROTOCOL_VERSION,
             join: device_join(&room),
             device: Some(DeviceHello {
-                id: id.into(),
-                role,
-                streams: vec![Stream::Head],
                 target: Some(target.into()),
-                world: Default::default(),
+                ..DeviceHello::worn(id, role, vec![Stream::Head])
             }),
         };
         let (c, reason) = Client::connect(relay.addr, hello, 0, true).await.closed().await;
@@ -705,4 +696,43 @@ async fn the_socket_needs_the_subprotocol() {
     assert_eq!(response.status(), 400);
     let body = String::from_utf8_lossy(response.body().as_deref().unwrap_or_default()).to_string();
     assert!(body.contains(LIVE_SUBPROTOCOL), "{body}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_fixed_camera_publishes_keypoints_only_and_viewers_see_its_mount() {
+    let relay = relay(test_limits()).await;
+    let room = create_room(relay.addr).await;
+    let code = |kind: CloseKind| kind.code();
+    // A fixed camera announcing a head pose it cannot have.
+    let fixed_with_head = ClientMessage::Hello {
+        protocol: LIVE_PROTOCOL_VERSION,
+        join: device_join(&room),
+        device: Some(DeviceHello {
+            mount: DeviceMount::Fixed,
+            ..DeviceHello::worn("webcam", DeviceRole::Observer, vec![Stream::Head, Stream::Keypoints])
+        }),
+    };
+    let (c, reason) = Client::connect(relay.addr, fixed_with_head, 0, true).await.closed().await;
+    assert_eq!(c, code(CloseKind::NotAllowed), "{reason}");
+    assert!(reason.contains("fixed camera"), "{reason}");
+    // Keypoints only: admitted, and its channel says what it is.
+    let mut viewer = welcomed_viewer(relay.addr, &room).await;
+    let webcam = ClientMessage::Hello {
+        protocol: LIVE_PROTOCOL_VERSION,
+        join: device_join(&room),
+        device: Some(DeviceHello {
+            world: DeviceWorld::Own,
+            mount: DeviceMount::Fixed,
+            focal_known: false,
+            ..DeviceHello::worn("webcam", DeviceRole::Observer, vec![Stream::Keypoints])
+        }),
+    };
+    let mut camera = Client::connect(relay.addr, webcam, 0, true).await;
+    camera.welcome().await;
+    let heard = viewer.listen_until(Duration::from_secs(10), Duration::ZERO, |h| !last_channels(h).is_empty()).await;
+    let channels = last_channels(&heard);
+    assert_eq!(channels.len(), 1, "{channels:?}");
+    let channel = &channels[0];
+    assert_eq!((channel.stream, channel.mount, channel.focal_known), (Stream::Keypoints, DeviceMount::Fixed, false));
+    assert_eq!(channel.world, DeviceWorld::Own);
 }

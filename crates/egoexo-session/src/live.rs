@@ -20,12 +20,12 @@ use egoexo_core::camera::CameraCalibration;
 use egoexo_core::exo_keypoints::{COCO17_COUNT, Keypoint2d};
 use egoexo_core::rigid::RigidTransform;
 use egoexo_protocol::live::{
-    ChannelInfo, DataFrame, DeviceHello, DeviceRole, DeviceWorld, FramePayload, Stream, valid_device_id,
+    ChannelInfo, DataFrame, DeviceHello, DeviceMount, DeviceRole, DeviceWorld, FramePayload, Stream, valid_device_id,
 };
 
 use crate::capture::{Capture, CaptureError, Participant, View, ViewPeople};
 use crate::model::{KeypointTrack, Observer, Session, SubjectInfo, Trajectory, Wearer, WristSource};
-use crate::placement::{Placement, WorldRef};
+use crate::placement::{Mount, Placement, WorldRef};
 use crate::validate::validate_session;
 use crate::{ImportError, ImportWarning};
 
@@ -98,11 +98,8 @@ pub fn capture_devices(capture: &Capture) -> Result<Vec<CaptureDevice>, TakeErro
         poses.extend(p.right_wrist.clone().map(|w| (Stream::RightWrist, w)));
         devices.push(CaptureDevice {
             hello: DeviceHello {
-                id: p.id.clone(),
-                role: DeviceRole::Wearer,
-                streams: poses.iter().map(|(s, _)| *s).collect(),
-                target: None,
                 world: device_world(&p.placement),
+                ..DeviceHello::worn(&p.id, DeviceRole::Wearer, poses.iter().map(|(s, _)| *s).collect())
             },
             camera: None,
             poses,
@@ -113,13 +110,13 @@ pub fn capture_devices(capture: &Capture) -> Result<Vec<CaptureDevice>, TakeErro
     // recording's observers without keypoints do).
     for p in capture.participants.iter().filter(|p| one_wearer && !p.reconstruct) {
         let (Some(calibration), false) = (p.camera, capture.views.iter().any(|v| v.observer == p.id)) else { continue };
+        if p.placement.mount == Mount::Fixed {
+            continue; // a static camera that sees nobody streams nothing
+        }
         devices.push(CaptureDevice {
             hello: DeviceHello {
-                id: p.id.clone(),
-                role: DeviceRole::Observer,
-                streams: vec![Stream::Head],
-                target: None,
                 world: device_world(&p.placement),
+                ..DeviceHello::worn(&p.id, DeviceRole::Observer, vec![Stream::Head])
             },
             camera: Some(calibration),
             poses: vec![(Stream::Head, p.head.clone())],
@@ -135,16 +132,23 @@ pub fn capture_devices(capture: &Capture) -> Result<Vec<CaptureDevice>, TakeErro
         } else {
             (format!("{}-sees-{target}", view.observer), Some(target.clone()))
         };
+        // A static camera streams its keypoints only: viewers place it by registration.
+        let fixed = camera.placement.mount == Mount::Fixed;
+        let (streams, poses) = if fixed {
+            (vec![Stream::Keypoints], Vec::new())
+        } else {
+            (vec![Stream::Head, Stream::Keypoints], vec![(Stream::Head, camera.head.clone())])
+        };
         devices.push(CaptureDevice {
             hello: DeviceHello {
-                id,
-                role: DeviceRole::Observer,
-                streams: vec![Stream::Head, Stream::Keypoints],
                 target,
-                world: device_world(&camera.placement),
+                world: if fixed { DeviceWorld::Own } else { device_world(&camera.placement) },
+                mount: if fixed { DeviceMount::Fixed } else { DeviceMount::Worn },
+                focal_known: camera.placement.focal_known || !fixed,
+                ..DeviceHello::worn(id, DeviceRole::Observer, streams)
             },
             camera: Some(calibration),
-            poses: vec![(Stream::Head, camera.head.clone())],
+            poses,
             keypoints: Some(keypoints.clone()),
         });
     }
@@ -173,17 +177,51 @@ fn live_placement(observer: DeviceWorld, wearer: DeviceWorld) -> Placement {
     }
 }
 
+/// A static camera's trajectory in a live take: its one pose, the identity (its world is its
+/// own device frame, placed by registration), at every time it has keypoints and at the
+/// wearer's first and last head pose (what alignment interpolates over). Empty when it has no
+/// keypoints: it contributes nothing.
+fn fixed_camera_trajectory(keypoint_times: impl Iterator<Item = i64>, wearer_head: &Trajectory) -> Trajectory {
+    let mut times: std::collections::BTreeSet<i64> = keypoint_times.collect();
+    if times.is_empty() {
+        return Trajectory::default();
+    }
+    times.extend(wearer_head.time_range_ns().map(|(a, b)| [a, b]).into_iter().flatten());
+    let timestamps_ns: Vec<i64> = times.into_iter().collect();
+    let poses = vec![RigidTransform::IDENTITY; timestamps_ns.len()];
+    Trajectory { timestamps_ns, poses }
+}
+
 /// One device's streams.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 struct DeviceTake {
     role: Option<DeviceRole>,
     /// An observer's target wearer, when it names one.
     target: Option<String>,
     /// Its world, as its hello said.
     world: DeviceWorld,
+    /// Worn, or a static camera without a pose, as its hello said.
+    mount: DeviceMount,
+    /// Whether its focal length is measured, as its hello said.
+    focal_known: bool,
     poses: BTreeMap<Stream, BTreeMap<i64, Option<RigidTransform>>>,
     keypoints: BTreeMap<i64, Keypoints>,
     camera: Option<CameraCalibration>,
+}
+
+impl Default for DeviceTake {
+    fn default() -> Self {
+        Self {
+            role: None,
+            target: None,
+            world: DeviceWorld::Shared,
+            mount: DeviceMount::Worn,
+            focal_known: true,
+            poses: BTreeMap::new(),
+            keypoints: BTreeMap::new(),
+            camera: None,
+        }
+    }
 }
 
 /// A take being recorded.
@@ -210,6 +248,8 @@ impl LiveTake {
             device.role = Some(channel.role);
             device.target.clone_from(&channel.target);
             device.world = channel.world;
+            device.mount = channel.mount;
+            device.focal_known = channel.focal_known;
         }
     }
 
@@ -257,9 +297,10 @@ impl LiveTake {
         self.stats
     }
 
-    /// Whether a device of the take said its world is its own.
+    /// Whether a device of the take said its world is its own, or is a static camera without
+    /// a pose (one of its own too).
     pub fn has_own_worlds(&self) -> bool {
-        self.devices.values().any(|d| d.world == DeviceWorld::Own)
+        self.devices.values().any(|d| d.world == DeviceWorld::Own || d.mount == DeviceMount::Fixed)
     }
 
     /// The wearers whose head has streamed: the first to stream it (whose head is the take's
@@ -355,7 +396,12 @@ impl LiveTake {
                 }
                 _ => {}
             }
-            let head = device.poses.get(&Stream::Head).map(trajectory).unwrap_or_default();
+            let fixed = device.mount == DeviceMount::Fixed;
+            let head = if fixed {
+                fixed_camera_trajectory(device.keypoints.range(range.clone()).map(|(t, _)| *t), &head)
+            } else {
+                device.poses.get(&Stream::Head).map(trajectory).unwrap_or_default()
+            };
             let Some(camera) = device.camera else {
                 warnings.push(ImportWarning {
                     file: format!("observers/{id}"),
@@ -378,7 +424,11 @@ impl LiveTake {
                 keypoints: (!keypoints.frames.is_empty()).then_some(keypoints),
                 video: None,
                 context_features: None,
-                placement: live_placement(device.world, wearer_world),
+                placement: if fixed {
+                    Placement::fixed_unposed(device.focal_known)
+                } else {
+                    live_placement(device.world, wearer_world)
+                },
             });
         }
         let session = Session {
@@ -462,13 +512,8 @@ mod tests {
     const MS: i64 = 1_000_000;
 
     fn channels() -> Vec<ChannelInfo> {
-        let c = |channel, device: &str, role, stream| ChannelInfo {
-            channel,
-            device: device.into(),
-            role,
-            stream,
-            target: None,
-            world: Default::default(),
+        let c = |channel, device: &str, role, stream| {
+            ChannelInfo::of(channel, &DeviceHello::worn(device, role, vec![]), stream)
         };
         vec![
             c(0, "wearer", DeviceRole::Wearer, Stream::Head),
@@ -539,14 +584,51 @@ mod tests {
     }
 
     #[test]
+    fn a_fixed_camera_is_one_unknown_pose_in_a_world_of_its_own_over_its_keypoints() {
+        let webcam = DeviceHello {
+            mount: DeviceMount::Fixed,
+            focal_known: false,
+            ..DeviceHello::worn("webcam", DeviceRole::Observer, vec![Stream::Keypoints])
+        };
+        let mut take = LiveTake::new();
+        take.set_channels(&[
+            ChannelInfo::of(0, &DeviceHello::worn("wearer", DeviceRole::Wearer, vec![]), Stream::Head),
+            ChannelInfo::of(1, &webcam, Stream::Keypoints),
+        ]);
+        take.set_camera("webcam", camera());
+        for i in 0..60 {
+            take.add_frame(&pose(i * 33 * MS, 0, true));
+        }
+        // No keypoints yet: nothing to contribute, left out.
+        assert!(take.to_session("take", None).unwrap().0.observers.is_empty());
+        assert!(take.has_own_worlds());
+        let points = [Some(Keypoint2d { pixel: Vec2::new(300.0, 200.0), score: 0.9 }); COCO17_COUNT];
+        for i in 10..40 {
+            take.add_frame(&DataFrame {
+                channel: 1,
+                timestamp_ns: i * 33 * MS + 5 * MS,
+                payload: FramePayload::Keypoints(points),
+            });
+        }
+        let (session, _) = take.to_session("take", None).unwrap();
+        let observer = &session.observers[0];
+        assert_eq!(observer.placement, Placement::fixed_unposed(false));
+        // The identity at every keypoint time and at the head's ends.
+        assert_eq!(observer.head.len(), 30 + 2);
+        assert!(observer.head.poses.iter().all(|p| *p == RigidTransform::IDENTITY));
+        assert_eq!(observer.head.time_range_ns(), Some((0, 59 * 33 * MS)));
+        // A window holds the keypoints inside it, and the window's head ends.
+        let (window, _) = take.to_session("window", Some(500 * MS..=800 * MS)).unwrap();
+        let head = &window.observers[0].head;
+        assert!(head.timestamps_ns.iter().all(|t| (500 * MS..=800 * MS).contains(t)), "{head:?}");
+        assert_eq!(window.observers[0].keypoints.as_ref().unwrap().frames.len(), head.len() - 2);
+    }
+
+    #[test]
     fn a_room_of_two_wearers_is_a_session_each_and_one_capture() {
-        let c = |channel, device: &str, role, stream, target: Option<&str>| ChannelInfo {
-            channel,
-            device: device.into(),
-            role,
-            stream,
-            target: target.map(Into::into),
-            world: Default::default(),
+        let c = |channel, device: &str, role, stream, target: Option<&str>| {
+            let hello = DeviceHello { target: target.map(Into::into), ..DeviceHello::worn(device, role, vec![]) };
+            ChannelInfo::of(channel, &hello, stream)
         };
         let mut take = LiveTake::new();
         take.set_channels(&[

@@ -9,10 +9,12 @@ use std::sync::Arc;
 
 use common::*;
 use egoexo_infer::{InferError, Method};
-use egoexo_protocol::live::{ChannelInfo, DataFrame, DeviceRole, DeviceWorld, FramePayload, RelayMessage, Stream};
+use egoexo_protocol::live::{
+    ChannelInfo, DataFrame, DeviceHello, DeviceMount, DeviceRole, DeviceWorld, FramePayload, RelayMessage, Stream,
+};
 use egoexo_scene::SceneData;
 use egoexo_session::{FileTree, ImportOptions, Limits, Session, import_session};
-use egoexo_synth::worlds::{WorldPerturbation, perturb_observer_worlds};
+use egoexo_synth::worlds::{WorldPerturbation, perturb_observer_worlds, unpose_static_cameras};
 use egoexo_web_worker::SessionWorker;
 use egoexo_web_worker::live::{LiveFrame, LiveReconstructor};
 
@@ -45,7 +47,8 @@ fn as_relay(session: &Session, observers: bool) -> (Vec<RelayMessage>, Vec<DataF
     };
     let mut add = |device: &str, role, stream, t: &egoexo_session::model::Trajectory, world| {
         let channel = channels.len() as u16;
-        channels.push(ChannelInfo { channel, device: device.into(), role, stream, target: None, world });
+        let hello = DeviceHello { world, ..DeviceHello::worn(device, role, vec![]) };
+        channels.push(ChannelInfo::of(channel, &hello, stream));
         for (ts, pose) in t.timestamps_ns.iter().zip(&t.poses) {
             frames.push(DataFrame { channel, timestamp_ns: *ts, payload: FramePayload::Pose(Some(*pose)) });
         }
@@ -61,14 +64,8 @@ fn as_relay(session: &Session, observers: bool) -> (Vec<RelayMessage>, Vec<DataF
     }
     for o in session.observers.iter().filter(|_| observers) {
         let channel = channels.len() as u16;
-        channels.push(ChannelInfo {
-            channel,
-            device: o.id.clone(),
-            role: DeviceRole::Observer,
-            stream: Stream::Keypoints,
-            target: None,
-            world: world_of(o),
-        });
+        let hello = DeviceHello { world: world_of(o), ..DeviceHello::worn(&o.id, DeviceRole::Observer, vec![]) };
+        channels.push(ChannelInfo::of(channel, &hello, Stream::Keypoints));
         let k = o.keypoints.as_ref().unwrap();
         for (ts, points) in k.timestamps_ns.iter().zip(&k.frames) {
             frames.push(DataFrame { channel, timestamp_ns: *ts, payload: FramePayload::Keypoints(*points) });
@@ -213,8 +210,7 @@ fn capture_as_relay(capture: &egoexo_session::capture::Capture) -> (Vec<RelayMes
     for device in egoexo_session::live::capture_devices(capture).unwrap() {
         let mut channel_of = |stream| {
             let channel = channels.len() as u16;
-            let (id, role, target) = (device.hello.id.clone(), device.hello.role, device.hello.target.clone());
-            channels.push(ChannelInfo { channel, device: id, role, stream, target, world: device.hello.world });
+            channels.push(ChannelInfo::of(channel, &device.hello, stream));
             channel
         };
         for (stream, t) in &device.poses {
@@ -391,4 +387,64 @@ fn observers_in_worlds_of_their_own_are_registered_while_they_stream_then_fused_
         median * 100.0
     );
     assert!(median < 0.01 && worst < 0.05, "median {median} m, worst {worst} m");
+}
+
+#[test]
+fn a_static_camera_without_a_pose_streams_keypoints_only_and_is_registered_in_six_dof_then_fused() {
+    let mut worker = worker_with_shipped_models();
+    // 20 s of a wearer wandering, watched by a tripod that knows nothing of its pose.
+    let mut config = egoexo_synth::SynthConfig { observers: 1, ..egoexo_synth::SynthConfig::default() };
+    config.observer.static_camera = true;
+    config.observer_noise = egoexo_synth::config::DeviceNoise::none();
+    let posed =
+        egoexo_synth::simulate(&egoexo_synth::procedural::wandering(20.0), "tripod", &config, 31).unwrap().session;
+    let mut unposed = posed.clone();
+    let truth = unpose_static_cameras(&mut unposed, true);
+    let (messages, frames) = as_relay(&posed, true);
+    let reference = stream_live(&mut worker, &messages, &frames);
+    // The camera joins as `"mount": "fixed"` and streams its keypoints only: no head channel.
+    let (messages, frames) = capture_as_relay(&egoexo_session::capture::Capture::from_session(&unposed));
+    let RelayMessage::Channels { channels } = &messages[0] else { panic!("{:?}", messages[0]) };
+    let camera: Vec<&ChannelInfo> = channels.iter().filter(|c| c.role == DeviceRole::Observer).collect();
+    assert_eq!(camera.len(), 1, "{channels:?}");
+    assert_eq!((camera[0].stream, camera[0].mount), (Stream::Keypoints, DeviceMount::Fixed));
+    let shown = stream_live(&mut worker, &messages, &frames);
+    assert_eq!(shown.len(), reference.len());
+    let first_ns = posed.wearer.head.timestamps_ns[0];
+    let Some(at) = shown.iter().position(|f| f.observer_worlds.iter().any(|o| o.state == "registered")) else {
+        panic!("not registered: {:#?}", shown.last().unwrap().observer_worlds)
+    };
+    let after_s = (shown[at].timestamp_ns - first_ns) as f64 / 1e9;
+    eprintln!("registered {after_s:.1} s into the stream: {:#?}", shown[at].observer_worlds);
+    assert!(after_s <= 15.0, "registered {after_s:.1} s into the stream");
+    for f in &shown[..at] {
+        assert!(f.exo_observers.is_empty(), "frame {} fused {:?} before registration", f.frame, f.exo_observers);
+    }
+    // Where it stands: the truth within 5 cm and 2° of heading.
+    let o = &shown.last().unwrap().observer_worlds[0];
+    let t = &truth[0];
+    let yaw_error = ((o.yaw_deg.unwrap() - t.yaw_deg() + 540.0).rem_euclid(360.0) - 180.0).abs();
+    let [x, y, z] = o.translation_m.unwrap();
+    let moved = egoexo_core::glam::Vec3::new(x as f32, y as f32, z as f32).distance(t.t_session_world.translation);
+    eprintln!("{}: yaw error {yaw_error:.2}°, translation error {:.1} cm", o.observer, moved * 100.0);
+    assert!(yaw_error < 2.0 && moved < 0.05, "{o:?} against {t:?}");
+    // Once registered it is fused as the posed camera is, and the skeleton is the same.
+    let fused = shown[at..].iter().filter(|f| !f.exo_observers.is_empty()).count();
+    let fused_reference = reference[at..].iter().filter(|f| !f.exo_observers.is_empty()).count();
+    assert!(fused * 10 >= fused_reference * 9, "{fused} frames fused after registration, {fused_reference} posed");
+    let mut differences: Vec<f32> = shown[at..]
+        .iter()
+        .zip(&reference[at..])
+        .flat_map(|(f, r)| {
+            let (a, b) = (joints(f), joints(r));
+            a.chunks(3)
+                .zip(b.chunks(3))
+                .map(|(p, q)| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt())
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    differences.sort_by(f32::total_cmp);
+    let median = differences[differences.len() / 2];
+    eprintln!("after registration the joints are within a median {:.2} cm of the posed camera's", median * 100.0);
+    assert!(median < 0.02, "median {median} m");
 }

@@ -160,8 +160,8 @@ impl Room {
         let mut streams = hello.streams.clone();
         streams.sort();
         streams.dedup();
-        if let Some(stream) = streams.iter().find(|s| !hello.role.allows(**s)) {
-            return Err(Close::new(CloseKind::NotAllowed, format!("a {:?} may not publish {stream:?}", hello.role)));
+        if let Some(why) = hello.refused_stream() {
+            return Err(Close::new(CloseKind::NotAllowed, why));
         }
         match inner.devices.get(&hello.id) {
             Some(existing) if existing.role != hello.role => {
@@ -199,23 +199,18 @@ impl Room {
         for &stream in &streams {
             if let std::collections::btree_map::Entry::Vacant(entry) = channels.entry(stream) {
                 let channel = inner.channels.len() as u16;
-                inner.channels.push(ChannelInfo {
-                    channel,
-                    device: hello.id.clone(),
-                    role: hello.role,
-                    stream,
-                    target: hello.target.clone(),
-                    world: hello.world,
-                });
+                inner.channels.push(ChannelInfo::of(channel, hello, stream));
                 inner.history.push(VecDeque::new());
                 entry.insert(channel);
                 changed = true;
             }
         }
         // A device that connects again in another world (a headset told its world is its own
-        // now) says so on every channel it had.
-        for channel in inner.channels.iter_mut().filter(|c| c.device == hello.id && c.world != hello.world) {
-            channel.world = hello.world;
+        // now), or mounted or calibrated otherwise, says so on every channel it had.
+        for channel in inner.channels.iter_mut().filter(|c| {
+            c.device == hello.id && (c.world, c.mount, c.focal_known) != (hello.world, hello.mount, hello.focal_known)
+        }) {
+            (channel.world, channel.mount, channel.focal_known) = (hello.world, hello.mount, hello.focal_known);
             changed = true;
         }
         let mut previous = inner.devices.remove(&hello.id);

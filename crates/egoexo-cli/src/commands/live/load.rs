@@ -314,8 +314,7 @@ pub fn run(args: Args) -> Result<()> {
                 } else {
                     (format!("observer-{k}"), DeviceRole::Observer)
                 };
-                let hello =
-                    DeviceHello { id, role, streams: vec![Stream::Head], target: None, world: Default::default() };
+                let hello = DeviceHello::worn(id, role, vec![Stream::Head]);
                 let join = Join::Secret { room: room.room.clone(), secret: room.device_secret.clone() };
                 devices.push(tokio::spawn(run_device(LoadDevice {
                     server: server.clone(),

@@ -599,13 +599,7 @@ mod tests {
         let samples = (0..20)
             .map(|i| Sample { t_ns: i * 100_000_000, stream: Stream::Head, payload: FramePayload::Pose(Some(pose)) })
             .collect();
-        let hello = DeviceHello {
-            id: "observer-1".into(),
-            role: DeviceRole::Observer,
-            streams: vec![Stream::Head],
-            target: None,
-            world: Default::default(),
-        };
+        let hello = DeviceHello::worn("observer-1", DeviceRole::Observer, vec![Stream::Head]);
         let mut plans = vec![DevicePlan { hello, camera: None, samples }];
         let mut rng = ChaCha8Rng::seed_from_u64(1);
         let worlds = recentre_worlds(&mut plans, (0, 1_900_000_000), &cli.args, &[], &mut rng);

@@ -99,6 +99,7 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
     facts([
       ['device code', room.device_code],
       ['headset page', `${base}xr.html#${live_fragment(room.room, room.device_secret)}`, true],
+      ['camera page', `${base}observe.html#${live_fragment(room.room, room.device_secret)}`, true],
       ['watch link', `${base}#${live_fragment(room.room, room.viewer_secret)}`, true],
       ['replay a session', `egoexo live replay session.egoexo --url ${state.share.apiBase} --room ${room.device_code}`, true],
       ['expires', room.expires_at],

@@ -24,11 +24,12 @@ const ARGS = [
   '--enable-unsafe-swiftshader',
 ];
 
-export function launch() {
+// `extraArgs`: more Chromium switches (e.g. a fake camera playing a file).
+export function launch(extraArgs = []) {
   return chromium.launch({
     executablePath: process.env.EGOEXO_CHROMIUM ?? '/usr/bin/chromium',
     headless: true,
-    args: ARGS,
+    args: [...ARGS, ...extraArgs],
   });
 }
 

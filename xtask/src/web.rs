@@ -241,13 +241,13 @@ fn gzipped_len(bytes: &[u8]) -> Result<u64> {
 }
 
 /// Files of `web/` served at the site's root (everything else is a versioned asset).
-const ROOT_FILES: &[&str] = &["index.html", "bench.html", "xr.html", "config.json"];
+const ROOT_FILES: &[&str] = &["index.html", "bench.html", "xr.html", "observe.html", "config.json"];
 
 /// `dist/` as a static site:
 ///
 /// ```text
 /// dist/index.html, bench.html,   the pages (no-cache), their asset URLs rewritten to v/<build>/
-///      xr.html
+///      xr.html, observe.html
 /// dist/config.json              the page's deployment settings (no-cache, editable in place)
 /// dist/v/<build>/               web/ (scripts, styles, icon) + public/ + models/ + pkg/
 /// ```

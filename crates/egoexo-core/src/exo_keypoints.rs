@@ -118,6 +118,27 @@ impl ExoKeypoint {
 /// body frame in the rest pose: Y up, facing +Z). Scaled with the skeleton.
 pub const NOSE_IN_HEAD_JOINT: Vec3 = Vec3::new(0.0, -0.01, 0.11);
 
+/// The COCO-17 skeleton's bones (pairs of keypoint indices) as drawn over a detection: face,
+/// arms, torso, legs.
+pub const COCO17_BONES: [(u8, u8); 16] = [
+    (0, 1),
+    (0, 2),
+    (1, 3),
+    (2, 4),
+    (5, 7),
+    (7, 9),
+    (6, 8),
+    (8, 10),
+    (5, 6),
+    (5, 11),
+    (6, 12),
+    (11, 12),
+    (11, 13),
+    (13, 15),
+    (12, 14),
+    (14, 16),
+];
+
 /// COCO-17's left–right mirror: keypoint `k`'s counterpart on the other side (the nose maps
 /// to itself).
 pub const COCO17_MIRROR: [usize; COCO17_COUNT] = [0, 2, 1, 4, 3, 6, 5, 8, 7, 10, 9, 12, 11, 14, 13, 16, 15];

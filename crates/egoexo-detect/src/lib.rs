@@ -17,6 +17,7 @@
 //! Conventions: pixels with the centre of the top-left pixel at (0, 0); session-clock
 //! nanoseconds.
 
+pub mod live;
 #[cfg(feature = "openh264")]
 pub mod native;
 pub mod people;

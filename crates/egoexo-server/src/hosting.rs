@@ -2,7 +2,7 @@
 //! deployment wants.
 //!
 //! - Assets under `/v/<build>/` (everything but the pages `index.html`, `bench.html`, `xr.html`,
-//!   `config.json` and the icon; the build id changes with any file's content) are
+//!   `observe.html`, `config.json` and the icon; the build id changes with any file's content) are
 //!   `Cache-Control: public, max-age=31536000, immutable`; the rest is `no-cache`, so a new
 //!   build is picked up on the next load and old assets never mix with new ones.
 //! - `Content-Security-Policy` without `unsafe-inline` or `unsafe-eval` (the wasm modules

@@ -5,6 +5,7 @@
 //!   string WebCodecs' `VideoDecoder` takes, and Annex B access units for native decoders.
 //! - [`mux`] writes encoded frames into an MP4 (the page's video export, the simulator's
 //!   observer videos).
+//! - [`y4m`] writes raw YUV 4:2:0 video, what Chromium's fake camera plays in browser tests.
 //!
 //! Times are the track's own ticks (`timescale` per second); where a frame sits on the session
 //! clock is the session's business (`egoexo_session::video`).
@@ -14,6 +15,7 @@ wasm_bindgen_test::wasm_bindgen_test_configure!(run_in_browser);
 
 pub mod demux;
 pub mod mux;
+pub mod y4m;
 
 pub use demux::{H264Track, VideoSample};
 pub use mux::{EncodedFrame, avcc_record, h264_mp4, parameter_sets};
@@ -29,6 +31,8 @@ pub enum VideoError {
     NoFrames,
     #[error("frame 0 is not a key frame: a video must start with one")]
     NoLeadingKeyFrame,
+    #[error("frame {index} has {got} bytes; expected {expected} (RGB, width × height × 3)")]
+    BadFrame { index: usize, got: usize, expected: usize },
     #[error("frame {index} is empty")]
     EmptyFrame { index: usize },
     #[error("a video of {width}×{height} px cannot be written: each side must be even and 2..=8192 px")]

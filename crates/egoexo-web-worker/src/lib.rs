@@ -25,6 +25,9 @@
 //!   reconstructed window by window at a chosen lookahead, one frame to draw at a time.
 //! - [`xr`] — the WebXR page's (`web/xr.html`) poses, frames and messages of the live
 //!   protocol (exported to JS as `xr_pose_frame`, `XrJoin`, …).
+//! - [`observe`] — the observer page's (`web/observe.html`) hello and calibration of a static
+//!   camera, and [`observe::LiveDetector`]: each camera frame's crop, the detector, the
+//!   keypoints frame (exported to JS as `LiveDetector`, `observeCalibration`, …).
 //!
 //! `web/worker.js` only creates the `WorkerApp` and hands it the page's messages. Nothing
 //! here reads the clock or spawns threads; timing belongs to the page.
@@ -33,6 +36,7 @@ pub mod bench;
 pub mod coordinator;
 pub mod detection;
 pub mod live;
+pub mod observe;
 pub mod pool;
 #[cfg(target_arch = "wasm32")]
 mod runtime;

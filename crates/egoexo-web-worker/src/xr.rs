@@ -161,13 +161,10 @@ pub fn hello(join: &Join, device_id: &str) -> Result<String, XrError> {
         protocol: LIVE_PROTOCOL_VERSION,
         join: join.clone(),
         device: Some(DeviceHello {
-            id: id.to_string(),
-            role: DeviceRole::Wearer,
-            streams: XR_STREAMS.to_vec(),
-            target: None,
             // A headset's XR reference space is its own: Y-up, floor-level, but a yaw and a
             // translation away from any other device's (`docs/registration.md`).
             world: DeviceWorld::Own,
+            ..DeviceHello::worn(id, DeviceRole::Wearer, XR_STREAMS.to_vec())
         }),
     };
     to_json(&message)
@@ -272,6 +269,14 @@ mod bindings {
         /// The hello (JSON) of the wearer `device_id`; an `Error` for an invalid id.
         pub fn hello(&self, device_id: &str) -> Result<String, JsError> {
             super::hello(&self.join, device_id).map_err(js)
+        }
+
+        /// The hello (JSON) of the static camera `device_id` watching `target` (empty: the
+        /// room's only wearer) for the observer page; an `Error` for an invalid id.
+        #[wasm_bindgen(js_name = observerHello)]
+        pub fn observer_hello(&self, device_id: &str, target: &str, focal_known: bool) -> Result<String, JsError> {
+            crate::observe::observer_hello(&self.join, device_id, Some(target), focal_known)
+                .map_err(|e| JsError::new(&e.to_string()))
         }
     }
 }

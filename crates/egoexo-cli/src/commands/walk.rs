@@ -12,6 +12,7 @@ use egoexo_synth::procedural::{walking_circle, wandering};
 use egoexo_synth::video::{Appearance, render_observer_videos};
 use egoexo_synth::worlds::{WorldPerturbation, WorldTruth, perturb_capture_worlds, perturb_observer_worlds};
 use egoexo_synth::{SynthConfig, simulate};
+use egoexo_video::y4m::Y4mWriter;
 
 use super::tracking::TrackingArg;
 
@@ -56,6 +57,16 @@ pub struct Args {
     /// step. The value is the cameras' image size, pixels (square; ≤ 1408).
     #[arg(long, value_name = "PX")]
     pub video: Option<u32>,
+    /// With `--video`: also write each observer's video as `<DIR>/<id>.y4m` (uncompressed YUV
+    /// 4:2:0, what Chromium's fake camera plays: `--use-file-for-fake-video-capture`) and its
+    /// camera as `<DIR>/<id>.camera.json` (`width`, `height`, `horizontal_fov_deg`); the
+    /// cameras are then pinholes, as a browser's camera is.
+    #[arg(long, value_name = "DIR", requires = "video")]
+    pub y4m: Option<PathBuf>,
+    /// Observers are tripods: static cameras aimed at the middle of the wearer's path, their
+    /// one pose given in the session's world (`egoexo_synth::config::ObserverBehaviour`).
+    #[arg(long)]
+    pub static_cameras: bool,
     /// Move every observer (every participant but the first) into a world of its own — any
     /// yaw, up to 10 m away, ±0.3 m of floor (`egoexo_synth::worlds`) — as two Aria glasses
     /// processed by MPS one by one would be; the truth goes to `<out>.worlds.json`.
@@ -126,16 +137,36 @@ pub fn run(args: Args) -> Result<()> {
         }
         config.camera.image_sizes = vec![px];
     }
+    if args.y4m.is_some() {
+        config.camera.fisheye_probability = 0.0;
+    }
+    config.observer.static_camera = args.static_cameras;
     let name = format!("walk-{}s", args.seconds);
     let motion = if args.wander { wandering(args.seconds) } else { walking_circle(args.seconds) };
     let mut sim = simulate(&motion, &name, &config, args.seed)?;
+    let mut raw_videos = Vec::new();
     let videos = if args.video.is_some() {
-        render_observer_videos(&mut sim, &motion, &Appearance::default(), |frames, w, h, fps| {
-            egoexo_detect::native::encode_mp4(frames, w, h, fps, 6_000_000)
+        render_observer_videos(&mut sim, &motion, &Appearance::default(), |frames, w, h, fps| -> Result<Vec<u8>> {
+            let mut y4m = args.y4m.as_ref().map(|_| Y4mWriter::new(w, h, fps.round() as u32)).transpose()?;
+            let mut failed = None;
+            let frames = frames.inspect(|rgb| {
+                if let Some(Err(e)) = y4m.as_mut().map(|y| y.push_rgb(rgb)) {
+                    failed.get_or_insert(e);
+                }
+            });
+            let mp4 = egoexo_detect::native::encode_mp4(frames, w, h, fps, 6_000_000)?;
+            if let Some(e) = failed {
+                return Err(e.into());
+            }
+            raw_videos.extend(y4m.map(Y4mWriter::finish).transpose()?);
+            Ok(mp4)
         })?
     } else {
         Default::default()
     };
+    if let Some(dir) = &args.y4m {
+        write_y4m(dir, &sim, raw_videos)?;
+    }
     let perturbation = perturbation(&args)?;
     let truth = perturbation.map(|p| perturb_observer_worlds(&mut sim.session, &p, args.seed));
     save_egoexo_with(&sim.session, videos, &args.out, args.folder)
@@ -146,6 +177,39 @@ pub fn run(args: Args) -> Result<()> {
         "observers",
         format!("{:.0} s of walking, {} observers", args.seconds, args.observers),
     )
+}
+
+/// Writes each observer's raw video and camera for a browser's fake camera (`--y4m`): its
+/// size, field of view, true pose at the first frame (`t_world_camera`: the camera frame, +Z
+/// forward and +Y down, in the session's world — what registering a browser camera, whose
+/// device frame is its camera frame, should find) and mean distance to the wearer's head.
+fn write_y4m(dir: &std::path::Path, sim: &egoexo_synth::SimulatedSession, videos: Vec<Vec<u8>>) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    for ((observer, bytes), heads) in sim.session.observers.iter().zip(videos).zip(&sim.true_observer_heads) {
+        let camera = &observer.camera;
+        let egoexo_core::camera::Projection::Pinhole(pinhole) = camera.projection else {
+            bail!("observer `{}`: a fake browser camera needs a pinhole camera", observer.id);
+        };
+        let fov = 2.0 * (0.5 * f64::from(camera.width) / f64::from(pinhole.fx)).atan().to_degrees();
+        let video = dir.join(format!("{}.y4m", observer.id));
+        std::fs::write(&video, bytes).with_context(|| format!("writing {}", video.display()))?;
+        let pose = camera.t_world_camera(heads.first().context("an observer without poses")?);
+        let wearer = &sim.session.wearer.head.poses;
+        let distance =
+            wearer.iter().map(|p| p.translation.distance(pose.translation)).sum::<f32>() / wearer.len().max(1) as f32;
+        let json = serde_json::json!({
+            "width": camera.width,
+            "height": camera.height,
+            "horizontal_fov_deg": fov,
+            "t_world_camera": {"rotation": pose.rotation.to_array(), "translation": pose.translation.to_array()},
+            "mean_distance_to_wearer_m": distance,
+        });
+        let path = dir.join(format!("{}.camera.json", observer.id));
+        std::fs::write(&path, serde_json::to_vec_pretty(&json)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+        println!("wrote {} ({:.0}° horizontal field of view)", video.display(), fov);
+    }
+    Ok(())
 }
 
 /// Says what was written (`what`, and its size for a file) and, for worlds moved apart

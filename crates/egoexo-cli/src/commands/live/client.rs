@@ -49,6 +49,11 @@ impl ServerAddress {
     pub fn device_link(&self, link: &LiveLink) -> String {
         format!("{}/xr.html#{}", self.http, link.fragment())
     }
+
+    /// The camera page address that joins `link`'s room as a static observer.
+    pub fn camera_link(&self, link: &LiveLink) -> String {
+        format!("{}/observe.html#{}", self.http, link.fragment())
+    }
 }
 
 /// How a command names a room: a device code (`7KQ-M4T`) or a link (`https://host/#live=…`,

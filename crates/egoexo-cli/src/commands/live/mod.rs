@@ -60,6 +60,7 @@ fn room(args: RoomArgs) -> Result<()> {
             "room": room.room,
             "device_code": room.device_code,
             "device_link": server.device_link(&device),
+            "camera_link": server.camera_link(&device),
             "watch_link": server.watch_link(&watch),
             "device_join": device.fragment().trim_start_matches("live="),
             "watch_join": watch.fragment().trim_start_matches("live="),
@@ -69,6 +70,7 @@ fn room(args: RoomArgs) -> Result<()> {
     } else {
         println!("device code: {}   (type it on a headset at {}/xr.html)", room.device_code, server.http);
         println!("devices:     {}", server.device_link(&device));
+        println!("cameras:     {}", server.camera_link(&device));
         println!("watch:       {}", server.watch_link(&watch));
         println!("expires:     {}", room.expires_at);
     }

@@ -53,6 +53,12 @@ pub struct Args {
     /// Where in the session to start, seconds after the wearer's first head pose.
     #[arg(long, default_value_t = 0.0)]
     pub start_s: f64,
+    /// Keep time with something that started at this wall-clock time (Unix milliseconds):
+    /// the session's `--start-s` moment is then, and streaming begins where the session is by
+    /// the time the devices are connected (e.g. a browser's fake camera filming a rendering of
+    /// the same session, started first).
+    #[arg(long, value_name = "UNIX_MS")]
+    pub start_at_unix_ms: Option<f64>,
     /// How much of the session to stream, seconds [default: to its end].
     #[arg(long)]
     pub duration_s: Option<f64>,
@@ -165,6 +171,27 @@ struct Sample {
     t_ns: i64,
     stream: Stream,
     payload: FramePayload,
+}
+
+/// The plans from where the session is `elapsed_ns` of wall time after its first streamed
+/// moment (at `speed`): the samples before then dropped, the range starting there.
+fn skip_elapsed(
+    mut plans: Vec<DevicePlan>,
+    range: (i64, i64),
+    elapsed_ns: i64,
+    speed: f64,
+) -> Result<(Vec<DevicePlan>, (i64, i64))> {
+    if elapsed_ns < 0 {
+        bail!("--start-at-unix-ms is {:.1} s in the future", -elapsed_ns as f64 / 1e9);
+    }
+    let from = range.0.saturating_add((elapsed_ns as f64 * speed) as i64);
+    if from >= range.1 {
+        bail!("--start-at-unix-ms: the session's streamed part ended {:.1} s ago", (from - range.1) as f64 / 1e9);
+    }
+    for plan in &mut plans {
+        plan.samples.retain(|s| s.t_ns >= from);
+    }
+    Ok((plans, (from, range.1)))
 }
 
 /// What one device sends.
@@ -516,6 +543,10 @@ pub fn run(args: Args) -> Result<()> {
         // A moment for every device to connect and the relay to learn its clock.
         let start = Instant::now() + Duration::from_millis(1500);
         let system_at_start = client::system_ns() + 1_500_000_000;
+        let (plans, range) = match args.start_at_unix_ms {
+            Some(ms) => skip_elapsed(plans, range, system_at_start - (ms * 1e6) as i64, args.speed)?,
+            None => (plans, range),
+        };
         let mut tasks = Vec::new();
         for plan in plans {
             let id = plan.hello.id.clone();
@@ -568,6 +599,28 @@ pub fn run(args: Args) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_replay_that_keeps_time_starts_where_the_session_is_now() {
+        let plan = |times: &[i64]| DevicePlan {
+            hello: DeviceHello::worn("wearer", DeviceRole::Wearer, vec![Stream::Head]),
+            camera: None,
+            samples: times
+                .iter()
+                .map(|&t_ns| Sample { t_ns, stream: Stream::Head, payload: FramePayload::Pose(None) })
+                .collect(),
+        };
+        let ms = 1_000_000;
+        // 1.2 s of wall time after the anchor, at twice real time: 2.4 s into the session.
+        let (plans, range) =
+            skip_elapsed(vec![plan(&[0, 1000 * ms, 2400 * ms, 3000 * ms])], (0, 4000 * ms), 1200 * ms, 2.0).unwrap();
+        assert_eq!(range, (2400 * ms, 4000 * ms));
+        assert_eq!(plans[0].samples.iter().map(|s| s.t_ns).collect::<Vec<_>>(), vec![2400 * ms, 3000 * ms]);
+        let future = skip_elapsed(vec![plan(&[0])], (0, 10), -5 * ms, 1.0).unwrap_err().to_string();
+        assert!(future.contains("in the future"), "{future}");
+        let over = skip_elapsed(vec![plan(&[0])], (0, 4000 * ms), 5000 * ms, 1.0).unwrap_err().to_string();
+        assert!(over.contains("ended 1.0 s ago"), "{over}");
+    }
 
     #[test]
     fn faults_parse() {

@@ -1,0 +1,133 @@
+// The observer page end to end: a camera in the room is a browser page. `egoexo walk` films a
+// wearer wandering in front of a tripod (`--static-cameras --video 480 --y4m`); a Chromium
+// whose fake camera plays that film opens the Live panel's camera link (`/observe.html`),
+// joins the room as a static camera and streams the keypoints its detector finds, while
+// `egoexo live replay --no-observers` streams the wearer's glasses. The watching page receives
+// the camera's keypoints, lists it, registers it in 6 DoF and fuses its rays.
+
+import assert from 'node:assert/strict';
+import { execFileSync, spawn } from 'node:child_process';
+import { mkdtempSync, readdirSync, readFileSync, rmSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join } from 'node:path';
+import { after, before, describe, test } from 'node:test';
+
+import { APP_URL, launch, openApp } from './browser.mjs';
+
+const EGOEXO = process.env.EGOEXO_BIN ?? 'egoexo';
+
+const dir = mkdtempSync(join(tmpdir(), 'egoexo-observe-'));
+let viewerBrowser;
+let cameraBrowser;
+let film;
+before(async () => {
+  // 16 s of a wearer wandering before one tripod, filmed at 480 × 480 (a pinhole of the
+  // simulator's field of view, written beside the film).
+  execFileSync(EGOEXO, [
+    'walk', '--seconds', '16', '--wander', '--observers', '1', '--static-cameras', '--video', '480',
+    '--y4m', join(dir, 'cameras'), '-o', join(dir, 'walk.egoexo'), '--seed', '5',
+  ], { stdio: ['ignore', 'ignore', 'inherit'] });
+  const name = readdirSync(join(dir, 'cameras')).find((f) => f.endsWith('.y4m'));
+  film = {
+    y4m: join(dir, 'cameras', name),
+    camera: JSON.parse(readFileSync(join(dir, 'cameras', name.replace(/\.y4m$/, '.camera.json')), 'utf8')),
+  };
+  viewerBrowser = await launch();
+  cameraBrowser = await launch([
+    '--use-fake-device-for-media-stream',
+    '--use-fake-ui-for-media-stream',
+    `--use-file-for-fake-video-capture=${film.y4m}`,
+  ]);
+});
+after(async () => {
+  await cameraBrowser?.close();
+  await viewerBrowser?.close();
+  rmSync(dir, { recursive: true, force: true });
+});
+
+function egoexo(args) {
+  return new Promise((resolve, reject) => {
+    const child = spawn(EGOEXO, args, { stdio: ['ignore', 'pipe', 'pipe'] });
+    let out = '';
+    let err = '';
+    child.stdout.on('data', (d) => (out += d));
+    child.stderr.on('data', (d) => (err += d));
+    child.on('error', reject);
+    child.on('exit', (code) => (code === 0 ? resolve(out) : reject(new Error(`egoexo ${args.join(' ')} exited ${code}:\n${err}`))));
+  });
+}
+
+const live = (app) => app.page.evaluate(() => {
+  const l = window.egoexo.live.snapshot();
+  return { frames: l.frames, devices: l.devices, lastFrame: l.lastFrame };
+});
+
+async function waitFor(what, read, predicate, timeout = 60_000) {
+  const start = Date.now();
+  for (;;) {
+    const now = await read();
+    if (predicate(now)) return now;
+    if (Date.now() - start > timeout) throw new Error(`waiting for ${what}: ${JSON.stringify(now).slice(0, 2000)}`);
+    await new Promise((r) => setTimeout(r, 250));
+  }
+}
+
+describe('observer page', () => {
+  test('a browser camera joins by the camera link, detects the wearer and is registered and fused', async (t) => {
+    const app = await openApp(viewerBrowser, '?backend=webgl2');
+    assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
+    await app.page.getByRole('button', { name: 'Go live' }).click();
+    await app.page.waitForSelector('#live-room[data-code]');
+    const code = await app.page.getAttribute('#live-room', 'data-code');
+    const link = new URL(await app.page.getByLabel('camera page').inputValue());
+    assert.equal(link.pathname, '/observe.html');
+    await app.waitState('live');
+
+    // The camera page from the link, told the film's field of view.
+    link.search = `?device=tripod&fov=${film.camera.horizontal_fov_deg.toFixed(3)}`;
+    const camera = await openApp(cameraBrowser, '', { path: link.href.slice(APP_URL.length) });
+    await camera.waitState(['ready', 'error', 'unsupported'], 60_000);
+    assert.equal(await camera.text('#link-label'), `room ${link.hash.slice(6, 12)}…`);
+    await camera.page.getByRole('button', { name: 'Start observing' }).click();
+    assert.equal(await camera.waitState(['observing', 'error'], 60_000), 'observing', await camera.text('#error-message'));
+    // The film started with the camera's first frame: the wearer's glasses keep time with it
+    // (the replay streams from where the walk is by the time it is connected).
+    const firstFrameMs = Number(await camera.page.evaluate(() => document.body.dataset.firstFrameMs));
+    const replay = egoexo(['live', 'replay', join(dir, 'walk.egoexo'), '--url', APP_URL, '--room', code,
+      '--no-observers', '--start-at-unix-ms', firstFrameMs.toFixed(3),
+      '--jitter-ms', '0', '--clock-spread-s', '0', '--drift-ppm', '0']);
+
+    // The camera page finds the wearer and draws them.
+    const found = await waitFor('detections on the camera page', () => camera.page.evaluate(() => Number(document.body.dataset.detections)), (n) => n >= 30);
+    t.diagnostic(`camera page: ${await camera.text('#detect-rate')}; region ${await camera.text('#crop-source')}`);
+    assert.ok(found >= 30);
+    assert.match(await camera.text('#camera-info'), /480×480, \d+(\.\d+)?° wide/);
+
+    // The watching page lists it, with its keypoints' rate, as a camera being registered.
+    const listed = await waitFor('the camera listed', () => live(app), (l) => l.devices.some((d) => d.device === 'tripod' && d.rates_hz.some(([s, hz]) => s === 'keypoints' && hz > 3)));
+    const tripod = listed.devices.find((d) => d.device === 'tripod');
+    t.diagnostic(`tripod on the relay: ${JSON.stringify(tripod.rates_hz)}, latency ${(tripod.latency_ns / 1e6).toFixed(0)} ms`);
+    const registering = await waitFor('the camera registering', () => live(app), (l) => (l.lastFrame?.observer_worlds ?? []).some((o) => o.observer === 'tripod'));
+    t.diagnostic(JSON.stringify(registering.lastFrame.observer_worlds));
+
+    // Registered from its views, then its rays fused.
+    const registered = await waitFor('the camera registered', () => live(app), (l) => (l.lastFrame?.observer_worlds ?? []).some((o) => o.observer === 'tripod' && o.state === 'registered'), 90_000);
+    const world = registered.lastFrame.observer_worlds.find((o) => o.observer === 'tripod');
+    t.diagnostic(`registered after ${world.registered_after_s?.toFixed(1)} s of views: ${world.message}`);
+    // Where it stands: the filmed camera's true place (its registration maps the page's device
+    // frame, the camera frame, into the wearer's world), within a tenth of its distance to the
+    // wearer — one camera's depth comes from the size of the body it sees, and the detector's
+    // keypoints of a rendered body measure it to a few per cent (docs/live-protocol.md).
+    const truth = film.camera.t_world_camera.translation;
+    const off = Math.hypot(...world.translation_m.map((v, i) => v - truth[i]));
+    const distance = film.camera.mean_distance_to_wearer_m;
+    t.diagnostic(`the camera placed ${(off * 100).toFixed(1)} cm from where it filmed, ${(100 * off / distance).toFixed(1)} % of its ${distance.toFixed(1)} m to the wearer`);
+    assert.ok(off < 0.1 * distance, `placed at ${world.translation_m}, filmed from ${truth}, ${distance} m from the wearer`);
+    await waitFor('its rays fused', () => live(app), (l) => (l.lastFrame?.exo_observers ?? []).includes('tripod'), 60_000);
+    await replay;
+    assert.deepEqual(camera.errors, []);
+    assert.deepEqual(app.errors, []);
+    await camera.close();
+    await app.close();
+  });
+});

@@ -1,0 +1,439 @@
+// The observer page: a phone's or a laptop's camera joins a live room as a static observer
+// and streams the keypoints its detector finds of the wearer (docs/live-protocol.md, "The
+// observer page").
+//
+// This file owns the camera, the clock and the socket. The hello, the calibration, the frame
+// times, where to crop, the detector and the data frames are Rust (pkg/egoexo_web_worker.js:
+// crates/egoexo-web-worker/src/observe.rs); the detector runs in observe-worker.js, fed
+// ImageBitmaps, so the page's thread only shows the preview.
+
+import init, { XrJoin, observeCalibration, observeFrameTimeNs, xr_answer, xr_close_may_retry } from './pkg/egoexo_web_worker.js';
+
+const SUBPROTOCOL = 'egoexo-live.1';
+// A keypoints frame is 217 bytes: skip, never queue, behind a slow network.
+const MAX_BUFFERED_BYTES = 4 * 1024;
+const RETRY_DELAYS_MS = [500, 1000, 2000, 4000, 8000];
+const DEVICE_ID_KEY = 'egoexo.observe.device-id';
+
+const $ = (id) => document.getElementById(id);
+const ui = {
+  form: $('join-form'),
+  codeField: $('code-field'),
+  code: $('code-input'),
+  device: $('device-input'),
+  target: $('target-input'),
+  camera: $('camera-select'),
+  fov: $('fov-input'),
+  enter: $('enter-button'),
+  stop: $('stop-button'),
+  linkNote: $('link-note'),
+  linkLabel: $('link-label'),
+  supportNote: $('support-note'),
+  errorPanel: $('error-panel'),
+  errorMessage: $('error-message'),
+  previewPanel: $('preview-panel'),
+  video: $('preview-video'),
+  overlay: $('preview-overlay'),
+  connection: $('connection'),
+  cameraInfo: $('camera-info'),
+  captureRate: $('capture-rate'),
+  detectRate: $('detect-rate'),
+  cropSource: $('crop-source'),
+  framesSent: $('frames-sent'),
+  registration: $('registration'),
+  closeReason: $('close-reason'),
+};
+
+const nowNs = () => (performance.timeOrigin + performance.now()) * 1e6;
+const message = (error) => (error instanceof Error ? error.message : String(error));
+
+const page = { linkJoin: null, run: null };
+
+function setState(state) {
+  document.body.dataset.state = state;
+}
+
+function showError(text) {
+  ui.errorMessage.textContent = text;
+  ui.errorPanel.hidden = false;
+  setState('error');
+}
+
+function clearError() {
+  ui.errorPanel.hidden = true;
+  ui.errorMessage.textContent = '';
+}
+
+// Frames per second over the last second, from the times they happened.
+class Rate {
+  constructor() { this.times = []; }
+  tick(now = performance.now()) {
+    this.times.push(now);
+    while (this.times.length > 0 && this.times[0] < now - 1000) this.times.shift();
+  }
+  get hz() {
+    const now = performance.now();
+    return this.times.filter((t) => t >= now - 1000).length;
+  }
+}
+
+// One run: the camera, the detector worker and the socket, reconnected on retryable closes.
+class Observation {
+  constructor(join, deviceId, target, stream) {
+    this.join = join;
+    this.joinLabel = join.label;
+    this.deviceId = deviceId;
+    this.target = target;
+    this.stream = stream;
+    this.track = stream.getVideoTracks()[0];
+    this.socket = null;
+    this.welcomed = false;
+    this.ended = false;
+    this.retries = 0;
+    this.retryTimer = 0;
+    this.worker = null;
+    this.workerReady = false;
+    this.busy = false;
+    this.bones = new Uint8Array();
+    this.captured = new Rate();
+    this.detected = new Rate();
+    this.framesSent = 0;
+    this.framesSkipped = 0;
+    this.detectMs = [];
+    this.last = null; // the newest detection, for the overlay
+    this.uiTimer = setInterval(() => this.showStats(), 250);
+  }
+
+  async start() {
+    const settings = this.track.getSettings();
+    const video = ui.video;
+    // Shown before it plays: a video that is not rendered gets no frame callbacks.
+    ui.previewPanel.hidden = false;
+    video.srcObject = this.stream;
+    await video.play();
+    this.width = video.videoWidth || settings.width;
+    this.height = video.videoHeight || settings.height;
+    // Browsers do not report a camera's field of view; unless the person gives it, the focal
+    // length is a guess that registration refines (the hello says so).
+    const fov = ui.fov.value === '' ? Number.NaN : Number(ui.fov.value);
+    const calibration = observeCalibration(this.width, this.height, fov);
+    this.calibration = calibration.json;
+    this.focalKnown = calibration.focalKnown;
+    this.hello = this.join.observerHello(this.deviceId, this.target, this.focalKnown);
+    ui.cameraInfo.textContent = `${this.track.label || 'camera'}, ${this.width}×${this.height}` +
+      (this.focalKnown ? `, ${fov}° wide` : ' (field of view unknown: focal length guessed, registration refines it)');
+    ui.overlay.width = this.width;
+    ui.overlay.height = this.height;
+    this.worker = new Worker(new URL('observe-worker.js', import.meta.url), { type: 'module' });
+    this.worker.onmessage = (event) => this.onWorker(event.data);
+    this.worker.onerror = (event) => this.fail(`The detector stopped: ${event.message ?? 'an error in its worker'}`);
+    this.track.addEventListener('ended', () => this.fail('The camera stopped (unplugged, or taken by another app).'));
+    this.connect();
+    this.nextFrame();
+  }
+
+  nextFrame() {
+    if (this.ended) return;
+    ui.video.requestVideoFrameCallback((now, metadata) => this.onVideoFrame(now, metadata));
+  }
+
+  onVideoFrame(now, metadata) {
+    if (this.ended) return;
+    this.nextFrame();
+    this.captured.tick();
+    // When the camera's first frame came (Unix ms): what a test films from starts then.
+    document.body.dataset.firstFrameMs ??= String(performance.timeOrigin + now);
+    // One frame at a time in the detector: a frame that arrives while it is busy is skipped,
+    // so what is sent is never stale.
+    if (!this.workerReady || this.busy || !this.welcomed) return;
+    const stampNs = observeFrameTimeNs(performance.timeOrigin, metadata.captureTime ?? Number.NaN,
+      metadata.presentationTime ?? now);
+    if (stampNs === undefined) return;
+    this.busy = true;
+    createImageBitmap(ui.video).then((bitmap) => {
+      if (this.ended) {
+        bitmap.close();
+        return;
+      }
+      this.worker.postMessage({ type: 'frame', bitmap, stampNs }, [bitmap]);
+    }).catch((error) => {
+      this.busy = false;
+      console.warn('egoexo observe: a frame could not be read:', message(error));
+    });
+  }
+
+  onWorker(data) {
+    if (this.ended) return;
+    if (data.type === 'ready') {
+      this.workerReady = true;
+      this.bones = data.bones;
+      return;
+    }
+    if (data.type === 'error') {
+      this.fail(data.message);
+      return;
+    }
+    if (data.type !== 'keypoints') return;
+    this.busy = false;
+    this.detected.tick();
+    this.detectMs.push(data.detectMs);
+    if (this.detectMs.length > 30) this.detectMs.shift();
+    this.last = data;
+    this.send(data.frame);
+    this.draw();
+  }
+
+  send(bytes) {
+    const socket = this.socket;
+    if (!socket || !this.welcomed || socket.readyState !== WebSocket.OPEN) return;
+    if (socket.bufferedAmount > MAX_BUFFERED_BYTES) {
+      this.framesSkipped += 1;
+      return;
+    }
+    socket.send(bytes);
+    this.framesSent += 1;
+  }
+
+  connect() {
+    if (this.ended) return;
+    const url = new URL('live', location.href);
+    url.protocol = location.protocol === 'https:' ? 'wss:' : 'ws:';
+    url.hash = '';
+    url.search = '';
+    ui.connection.textContent = `connecting to ${this.joinLabel}…`;
+    setState(this.retries > 0 ? 'reconnecting' : 'connecting');
+    let socket;
+    try {
+      socket = new WebSocket(url.href, SUBPROTOCOL);
+    } catch (error) {
+      this.fail(`Could not open the connection to the relay: ${message(error)}`);
+      return;
+    }
+    socket.binaryType = 'arraybuffer';
+    this.socket = socket;
+    socket.onopen = () => socket.send(this.hello);
+    socket.onmessage = (event) => this.onMessage(event);
+    socket.onclose = (event) => this.onClose(socket, event);
+  }
+
+  onMessage(event) {
+    if (typeof event.data !== 'string') return;
+    let pong;
+    try {
+      pong = xr_answer(event.data, nowNs());
+    } catch (error) {
+      console.warn('egoexo observe: ignoring a relay message:', message(error));
+      return;
+    }
+    if (pong !== undefined) {
+      this.socket?.send(pong);
+      return;
+    }
+    const parsed = JSON.parse(event.data);
+    if (parsed.type === 'welcome') {
+      // The camera first, then keypoints: viewers place keypoints with it.
+      this.socket.send(this.calibration);
+      this.welcomed = true;
+      this.retries = 0;
+      clearError();
+      setState('observing');
+      ui.connection.textContent = `observing for ${this.joinLabel} (room open until ${parsed.expires_at})`;
+    }
+  }
+
+  onClose(socket, event) {
+    if (socket !== this.socket) return;
+    this.socket = null;
+    this.welcomed = false;
+    const reason = event.reason || (event.code === 1006 ? 'the connection was lost' : 'no reason given');
+    ui.closeReason.textContent = `${reason} (${event.code})`;
+    if (this.ended) return;
+    if (xr_close_may_retry(event.code)) {
+      const delay = RETRY_DELAYS_MS[Math.min(this.retries, RETRY_DELAYS_MS.length - 1)];
+      this.retries += 1;
+      setState('reconnecting');
+      ui.connection.textContent = `reconnecting in ${(delay / 1000).toFixed(1)} s (${reason})`;
+      this.retryTimer = setTimeout(() => this.connect(), delay);
+    } else {
+      this.fail(`The relay closed the connection: ${reason} (${event.code}).`);
+    }
+  }
+
+  fail(text) {
+    this.stop();
+    showError(text);
+  }
+
+  stop(closeReason = 'the camera stopped observing') {
+    if (this.ended) return;
+    this.ended = true;
+    clearTimeout(this.retryTimer);
+    clearInterval(this.uiTimer);
+    this.showStats();
+    if (this.socket && this.socket.readyState <= WebSocket.OPEN) this.socket.close(1000, closeReason);
+    this.socket = null;
+    this.worker?.terminate();
+    for (const track of this.stream.getTracks()) track.stop();
+    ui.connection.textContent = 'not connected';
+    if (page.run === this) page.run = null;
+    ui.enter.disabled = false;
+    ui.stop.hidden = true;
+    if (document.body.dataset.state !== 'error') setState('ready');
+  }
+
+  // The preview's overlay: the searched region (dashed) and the person found.
+  draw() {
+    const canvas = ui.overlay;
+    const ctx = canvas.getContext('2d');
+    ctx.clearRect(0, 0, canvas.width, canvas.height);
+    const last = this.last;
+    if (!last) return;
+    const scale = Math.max(1, canvas.width / 640);
+    if (last.window.length === 3) {
+      const [x, y, side] = last.window;
+      ctx.setLineDash([8 * scale, 6 * scale]);
+      ctx.lineWidth = 2 * scale;
+      ctx.strokeStyle = '#f2c14e';
+      ctx.strokeRect(x, y, side, side);
+      ctx.setLineDash([]);
+    }
+    const k = last.keypoints;
+    const at = (i) => (Number.isNaN(k[3 * i]) ? null : [k[3 * i], k[3 * i + 1]]);
+    ctx.strokeStyle = '#5fd38d';
+    ctx.lineWidth = 3 * scale;
+    for (let b = 0; b + 1 < this.bones.length; b += 2) {
+      const p = at(this.bones[b]);
+      const q = at(this.bones[b + 1]);
+      if (!p || !q) continue;
+      ctx.beginPath();
+      ctx.moveTo(p[0], p[1]);
+      ctx.lineTo(q[0], q[1]);
+      ctx.stroke();
+    }
+    ctx.fillStyle = '#ffffff';
+    for (let i = 0; i < k.length / 3; i += 1) {
+      const p = at(i);
+      if (!p) continue;
+      ctx.beginPath();
+      ctx.arc(p[0], p[1], 4 * scale, 0, 2 * Math.PI);
+      ctx.fill();
+    }
+  }
+
+  showStats() {
+    const ended = this.ended;
+    ui.captureRate.textContent = ended ? '—' : `${this.captured.hz} frames/s`;
+    const ms = [...this.detectMs].sort((a, b) => a - b);
+    const median = ms.length ? ms[Math.floor(ms.length / 2)] : null;
+    const last = this.last;
+    ui.detectRate.textContent = ended || !this.workerReady
+      ? (this.workerReady ? '—' : 'loading the detector…')
+      : `${this.detected.hz} frames/s${median === null ? '' : `, ${median.toFixed(0)} ms each`}` +
+        (last ? `; someone found in ${last.found} of ${last.frames} frames` : '');
+    ui.cropSource.textContent = ended || !last ? '—' : last.cropSource;
+    ui.framesSent.textContent = `${this.framesSent}${this.framesSkipped ? ` (${this.framesSkipped} skipped on a slow network)` : ''}`;
+    ui.registration.textContent = ended ? '—'
+      : 'by the page watching the room (its device list shows this camera registering, then registered)';
+    document.body.dataset.detections = last ? String(last.found) : '0';
+  }
+}
+
+async function listCameras() {
+  try {
+    const devices = await navigator.mediaDevices.enumerateDevices();
+    const cameras = devices.filter((d) => d.kind === 'videoinput' && d.deviceId);
+    const chosen = ui.camera.value;
+    ui.camera.replaceChildren(new Option('the default camera', ''));
+    cameras.forEach((d, i) => ui.camera.append(new Option(d.label || `camera ${i + 1}`, d.deviceId)));
+    ui.camera.value = chosen;
+  } catch {
+    // labels come after permission; the default camera still works
+  }
+}
+
+async function startObserving() {
+  clearError();
+  let join;
+  try {
+    join = page.linkJoin ?? XrJoin.parse(ui.code.value);
+    join.observerHello(ui.device.value, ui.target.value, true); // checks the ids first
+  } catch (error) {
+    showError(message(error));
+    return;
+  }
+  const deviceId = ui.device.value.trim();
+  try {
+    localStorage.setItem(DEVICE_ID_KEY, deviceId);
+  } catch {
+    // storage may be off
+  }
+  ui.enter.disabled = true;
+  let stream;
+  try {
+    const video = { width: { ideal: 640 }, height: { ideal: 480 } };
+    if (ui.camera.value) video.deviceId = { exact: ui.camera.value };
+    stream = await navigator.mediaDevices.getUserMedia({ video, audio: false });
+  } catch (error) {
+    ui.enter.disabled = false;
+    const why = error?.name === 'NotAllowedError' ? 'permission to use the camera was refused' : message(error);
+    showError(`No camera: ${why}.`);
+    return;
+  }
+  listCameras();
+  const run = new Observation(join, deviceId, ui.target.value.trim(), stream);
+  page.run = run;
+  ui.stop.hidden = false;
+  try {
+    await run.start();
+  } catch (error) {
+    run.fail(message(error));
+  }
+}
+
+async function main() {
+  await init();
+  try {
+    page.linkJoin = XrJoin.fromFragment(location.hash) ?? null;
+  } catch (error) {
+    showError(message(error));
+  }
+  if (page.linkJoin) {
+    ui.linkLabel.textContent = page.linkJoin.label;
+    ui.linkNote.hidden = false;
+    ui.codeField.hidden = true;
+  }
+  const params = new URLSearchParams(location.search);
+  if (params.get('target')) ui.target.value = params.get('target');
+  if (params.get('fov')) ui.fov.value = params.get('fov');
+  try {
+    const saved = localStorage.getItem(DEVICE_ID_KEY);
+    if (saved) ui.device.value = saved;
+  } catch {
+    // storage may be off
+  }
+  if (params.get('device')) ui.device.value = params.get('device');
+  ui.form.addEventListener('submit', (event) => {
+    event.preventDefault();
+    if (!page.run) startObserving();
+  });
+  ui.stop.addEventListener('click', () => page.run?.stop());
+  if (!navigator.mediaDevices?.getUserMedia) {
+    ui.supportNote.textContent = window.isSecureContext
+      ? 'This browser gives pages no camera.'
+      : 'A camera needs a secure page: open this page over https:// (or on localhost, e.g. through `adb reverse`).';
+    ui.supportNote.hidden = false;
+    setState('unsupported');
+    return;
+  }
+  if (!('requestVideoFrameCallback' in HTMLVideoElement.prototype)) {
+    ui.supportNote.textContent = 'This browser cannot hand a page its camera frames one by one (requestVideoFrameCallback).';
+    ui.supportNote.hidden = false;
+    setState('unsupported');
+    return;
+  }
+  await listCameras();
+  ui.enter.disabled = false;
+  if (document.body.dataset.state !== 'error') setState('ready');
+}
+
+main().catch((error) => showError(`The page could not start: ${message(error)}`));

@@ -7,12 +7,9 @@
 // crates/egoexo-web-worker/src/observe.rs); the detector runs in observe-worker.js, fed
 // ImageBitmaps, so the page's thread only shows the preview.
 
-import init, { XrJoin, observeCalibration, observeFrameTimeNs, xr_answer, xr_close_may_retry } from './pkg/egoexo_web_worker.js';
+import init, { XrJoin, observeCalibration, observeFrameTimeNs } from './pkg/egoexo_web_worker.js';
+import { DeviceSocket } from './device-socket.js';
 
-const SUBPROTOCOL = 'egoexo-live.1';
-// A keypoints frame is 217 bytes: skip, never queue, behind a slow network.
-const MAX_BUFFERED_BYTES = 4 * 1024;
-const RETRY_DELAYS_MS = [500, 1000, 2000, 4000, 8000];
 const DEVICE_ID_KEY = 'egoexo.observe.device-id';
 
 const $ = (id) => document.getElementById(id);
@@ -86,19 +83,36 @@ class Observation {
     this.target = target;
     this.stream = stream;
     this.track = stream.getVideoTracks()[0];
-    this.socket = null;
-    this.welcomed = false;
     this.ended = false;
-    this.retries = 0;
-    this.retryTimer = 0;
+    this.relay = new DeviceSocket({
+      hello: () => this.hello,
+      nowNs,
+      onConnecting: (retry) => {
+        ui.connection.textContent = `connecting to ${this.joinLabel}…`;
+        setState(retry ? 'reconnecting' : 'connecting');
+      },
+      onWelcome: (welcome) => {
+        // The camera first, then keypoints: viewers place keypoints with it.
+        this.relay.sendText(this.calibration);
+        clearError();
+        setState('observing');
+        ui.connection.textContent = `observing for ${this.joinLabel} (room open until ${welcome.expires_at})`;
+      },
+      onClosed: (reason, code) => {
+        ui.closeReason.textContent = `${reason} (${code})`;
+      },
+      onRetry: (delay, reason) => {
+        setState('reconnecting');
+        ui.connection.textContent = `reconnecting in ${(delay / 1000).toFixed(1)} s (${reason})`;
+      },
+      onFail: (text) => this.fail(text),
+    });
     this.worker = null;
     this.workerReady = false;
     this.busy = false;
     this.bones = new Uint8Array();
     this.captured = new Rate();
     this.detected = new Rate();
-    this.framesSent = 0;
-    this.framesSkipped = 0;
     this.detectMs = [];
     this.last = null; // the newest detection, for the overlay
     this.uiTimer = setInterval(() => this.showStats(), 250);
@@ -128,7 +142,7 @@ class Observation {
     this.worker.onmessage = (event) => this.onWorker(event.data);
     this.worker.onerror = (event) => this.fail(`The detector stopped: ${event.message ?? 'an error in its worker'}`);
     this.track.addEventListener('ended', () => this.fail('The camera stopped (unplugged, or taken by another app).'));
-    this.connect();
+    this.relay.connect();
     this.nextFrame();
   }
 
@@ -145,7 +159,7 @@ class Observation {
     document.body.dataset.firstFrameMs ??= String(performance.timeOrigin + now);
     // One frame at a time in the detector: a frame that arrives while it is busy is skipped,
     // so what is sent is never stale.
-    if (!this.workerReady || this.busy || !this.welcomed) return;
+    if (!this.workerReady || this.busy || !this.relay.open) return;
     const stampNs = observeFrameTimeNs(performance.timeOrigin, metadata.captureTime ?? Number.NaN,
       metadata.presentationTime ?? now);
     if (stampNs === undefined) return;
@@ -179,84 +193,8 @@ class Observation {
     this.detectMs.push(data.detectMs);
     if (this.detectMs.length > 30) this.detectMs.shift();
     this.last = data;
-    this.send(data.frame);
+    this.relay.sendFrame(data.frame);
     this.draw();
-  }
-
-  send(bytes) {
-    const socket = this.socket;
-    if (!socket || !this.welcomed || socket.readyState !== WebSocket.OPEN) return;
-    if (socket.bufferedAmount > MAX_BUFFERED_BYTES) {
-      this.framesSkipped += 1;
-      return;
-    }
-    socket.send(bytes);
-    this.framesSent += 1;
-  }
-
-  connect() {
-    if (this.ended) return;
-    const url = new URL('live', location.href);
-    url.protocol = location.protocol === 'https:' ? 'wss:' : 'ws:';
-    url.hash = '';
-    url.search = '';
-    ui.connection.textContent = `connecting to ${this.joinLabel}…`;
-    setState(this.retries > 0 ? 'reconnecting' : 'connecting');
-    let socket;
-    try {
-      socket = new WebSocket(url.href, SUBPROTOCOL);
-    } catch (error) {
-      this.fail(`Could not open the connection to the relay: ${message(error)}`);
-      return;
-    }
-    socket.binaryType = 'arraybuffer';
-    this.socket = socket;
-    socket.onopen = () => socket.send(this.hello);
-    socket.onmessage = (event) => this.onMessage(event);
-    socket.onclose = (event) => this.onClose(socket, event);
-  }
-
-  onMessage(event) {
-    if (typeof event.data !== 'string') return;
-    let pong;
-    try {
-      pong = xr_answer(event.data, nowNs());
-    } catch (error) {
-      console.warn('egoexo observe: ignoring a relay message:', message(error));
-      return;
-    }
-    if (pong !== undefined) {
-      this.socket?.send(pong);
-      return;
-    }
-    const parsed = JSON.parse(event.data);
-    if (parsed.type === 'welcome') {
-      // The camera first, then keypoints: viewers place keypoints with it.
-      this.socket.send(this.calibration);
-      this.welcomed = true;
-      this.retries = 0;
-      clearError();
-      setState('observing');
-      ui.connection.textContent = `observing for ${this.joinLabel} (room open until ${parsed.expires_at})`;
-    }
-  }
-
-  onClose(socket, event) {
-    if (socket !== this.socket) return;
-    this.socket = null;
-    this.welcomed = false;
-    const reason = event.reason || (event.code === 1006 ? 'the connection was lost' : 'no reason given');
-    ui.closeReason.textContent = `${reason} (${event.code})`;
-    if (this.ended) return;
-    if (xr_close_may_retry(event.code)) {
-      const delay = RETRY_DELAYS_MS[Math.min(this.retries, RETRY_DELAYS_MS.length - 1)];
-      this.retries += 1;
-      setState('reconnecting');
-      ui.connection.textContent = `reconnecting in ${(delay / 1000).toFixed(1)} s (${reason})`;
-      this.retryTimer = setTimeout(() => this.connect(), delay);
-    } else {
-      this.fail(`The relay closed the connection: ${reason} (${event.code}).`);
-    }
   }
 
   fail(text) {
@@ -267,11 +205,9 @@ class Observation {
   stop(closeReason = 'the camera stopped observing') {
     if (this.ended) return;
     this.ended = true;
-    clearTimeout(this.retryTimer);
     clearInterval(this.uiTimer);
     this.showStats();
-    if (this.socket && this.socket.readyState <= WebSocket.OPEN) this.socket.close(1000, closeReason);
-    this.socket = null;
+    this.relay.close(closeReason);
     this.worker?.terminate();
     for (const track of this.stream.getTracks()) track.stop();
     ui.connection.textContent = 'not connected';
@@ -331,7 +267,8 @@ class Observation {
       : `${this.detected.hz} frames/s${median === null ? '' : `, ${median.toFixed(0)} ms each`}` +
         (last ? `; someone found in ${last.found} of ${last.frames} frames` : '');
     ui.cropSource.textContent = ended || !last ? '—' : last.cropSource;
-    ui.framesSent.textContent = `${this.framesSent}${this.framesSkipped ? ` (${this.framesSkipped} skipped on a slow network)` : ''}`;
+    const { sent, skipped } = this.relay;
+    ui.framesSent.textContent = `${sent}${skipped ? ` (${skipped} skipped on a slow network)` : ''}`;
     ui.registration.textContent = ended ? '—'
       : 'by the page watching the room (its device list shows this camera registering, then registered)';
     document.body.dataset.detections = last ? String(last.found) : '0';

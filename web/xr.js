@@ -6,13 +6,9 @@
 // conventions), the frames, the hello, the pongs and which closes to retry are Rust, in
 // pkg/egoexo_web_worker.js (crates/egoexo-web-worker/src/xr.rs over egoexo_core::xr).
 
-import init, { XrJoin, XrSource, xr_answer, xr_close_may_retry, xr_pose_frame } from './pkg/egoexo_web_worker.js';
+import init, { XrJoin, XrSource, xr_pose_frame } from './pkg/egoexo_web_worker.js';
+import { DeviceSocket } from './device-socket.js';
 
-const SUBPROTOCOL = 'egoexo-live.1';
-// Frames are skipped, not queued, while the socket holds more than this unsent (about half a
-// second of frames): a pose that waits behind a slow network is stale by the time it arrives.
-const MAX_BUFFERED_BYTES = 4 * 1024;
-const RETRY_DELAYS_MS = [500, 1000, 2000, 4000, 8000];
 const DEVICE_ID_KEY = 'egoexo.xr.device-id';
 
 const $ = (id) => document.getElementById(id);
@@ -74,16 +70,31 @@ function message(error) {
 // while the session lasts.
 class Stream {
   constructor(join, deviceId, session) {
-    this.hello = join.hello(deviceId);
-    this.joinLabel = join.label;
+    const hello = join.hello(deviceId);
+    const label = join.label;
     this.session = session;
-    this.socket = null;
-    this.welcomed = false;
     this.ended = false;
-    this.retries = 0;
-    this.retryTimer = 0;
-    this.framesSent = 0;
-    this.framesSkipped = 0;
+    this.relay = new DeviceSocket({
+      hello: () => hello,
+      nowNs,
+      onConnecting: (retry) => {
+        ui.connection.textContent = `connecting to ${label}…`;
+        setState(retry ? 'reconnecting' : 'connecting');
+      },
+      onWelcome: (welcome) => {
+        clearError();
+        setState('streaming');
+        ui.connection.textContent = `streaming to ${label} (room open until ${welcome.expires_at})`;
+      },
+      onClosed: (reason, code) => {
+        ui.closeReason.textContent = `${reason} (${code})`;
+      },
+      onRetry: (delay, reason) => {
+        setState('reconnecting');
+        ui.connection.textContent = `reconnecting in ${(delay / 1000).toFixed(1)} s (${reason})`;
+      },
+      onFail: (text) => this.fail(text),
+    });
     this.frameTimes = []; // performance.now() of recent XR frames, for the rate
     this.tracking = '—';
     this.refSpace = null;
@@ -92,70 +103,6 @@ class Stream {
     this.orientation = new Float32Array(4);
     this.warned = false;
     this.uiTimer = setInterval(() => this.showStats(), 250);
-  }
-
-  connect() {
-    if (this.ended) return;
-    const url = new URL('live', location.href);
-    url.protocol = location.protocol === 'https:' ? 'wss:' : 'ws:';
-    url.hash = '';
-    url.search = '';
-    ui.connection.textContent = `connecting to ${this.joinLabel}…`;
-    setState(this.retries > 0 ? 'reconnecting' : 'connecting');
-    let socket;
-    try {
-      socket = new WebSocket(url.href, SUBPROTOCOL);
-    } catch (error) {
-      this.fail(`Could not open the connection to the relay: ${message(error)}`);
-      return;
-    }
-    socket.binaryType = 'arraybuffer';
-    this.socket = socket;
-    socket.onopen = () => socket.send(this.hello);
-    socket.onmessage = (event) => this.onMessage(event);
-    socket.onclose = (event) => this.onClose(socket, event);
-  }
-
-  onMessage(event) {
-    if (typeof event.data !== 'string') return; // devices receive no data frames
-    let pong;
-    try {
-      // Parsed in Rust: the relay's time must be echoed to the nanosecond.
-      pong = xr_answer(event.data, nowNs());
-    } catch (error) {
-      console.warn('egoexo xr: ignoring a relay message:', message(error));
-      return;
-    }
-    if (pong !== undefined) {
-      this.socket?.send(pong);
-      return;
-    }
-    const parsed = JSON.parse(event.data);
-    if (parsed.type === 'welcome') {
-      this.welcomed = true;
-      this.retries = 0;
-      clearError();
-      setState('streaming');
-      ui.connection.textContent = `streaming to ${this.joinLabel} (room open until ${parsed.expires_at})`;
-    }
-  }
-
-  onClose(socket, event) {
-    if (socket !== this.socket) return;
-    this.socket = null;
-    this.welcomed = false;
-    const reason = event.reason || (event.code === 1006 ? 'the connection was lost' : 'no reason given');
-    ui.closeReason.textContent = `${reason} (${event.code})`;
-    if (this.ended) return;
-    if (xr_close_may_retry(event.code)) {
-      const delay = RETRY_DELAYS_MS[Math.min(this.retries, RETRY_DELAYS_MS.length - 1)];
-      this.retries += 1;
-      setState('reconnecting');
-      ui.connection.textContent = `reconnecting in ${(delay / 1000).toFixed(1)} s (${reason})`;
-      this.retryTimer = setTimeout(() => this.connect(), delay);
-    } else {
-      this.fail(`The relay closed the connection: ${reason} (${event.code}).`);
-    }
   }
 
   // Ends the stream for good with an error the person can read once out of XR.
@@ -167,11 +114,9 @@ class Stream {
   stop(closeReason = 'the wearer stopped streaming') {
     if (this.ended) return;
     this.ended = true;
-    clearTimeout(this.retryTimer);
     clearInterval(this.uiTimer);
     this.showStats();
-    if (this.socket && this.socket.readyState <= WebSocket.OPEN) this.socket.close(1000, closeReason);
-    this.socket = null;
+    this.relay.close(closeReason);
     ui.connection.textContent = 'not connected';
     try {
       this.session.end().catch(() => {}); // already ended when the person left XR
@@ -245,12 +190,7 @@ class Stream {
   }
 
   send(source, stampNs, transform) {
-    const socket = this.socket;
-    if (!socket || !this.welcomed || socket.readyState !== WebSocket.OPEN) return;
-    if (socket.bufferedAmount > MAX_BUFFERED_BYTES) {
-      this.framesSkipped += 1;
-      return;
-    }
+    if (!this.relay.open) return;
     let bytes;
     try {
       if (transform) {
@@ -265,8 +205,7 @@ class Stream {
       this.warned = true;
       bytes = xr_pose_frame(source, stampNs, this.position, this.orientation, false);
     }
-    socket.send(bytes);
-    this.framesSent += 1;
+    this.relay.sendFrame(bytes);
   }
 
   // What the wearer sees: the colour of the connection (green streaming, amber connecting,
@@ -283,7 +222,8 @@ class Stream {
   }
 
   showStats() {
-    ui.framesSent.textContent = `${this.framesSent}${this.framesSkipped ? ` (${this.framesSkipped} skipped on a slow network)` : ''}`;
+    const { sent, skipped } = this.relay;
+    ui.framesSent.textContent = `${sent}${skipped ? ` (${skipped} skipped on a slow network)` : ''}`;
     const hz = this.frameTimes.length;
     ui.rate.textContent = this.ended ? '—' : `${hz} Hz (${this.refSpaceType ?? 'no'} space)`;
     ui.tracking.textContent = this.ended ? '—' : this.tracking;
@@ -322,7 +262,7 @@ async function enterXr() {
   const run = new Stream(join, deviceId, session);
   page.run = run;
   ui.stop.hidden = false;
-  run.connect();
+  run.relay.connect();
   try {
     await run.startXr();
   } catch (error) {

@@ -9,6 +9,7 @@
 
 import init, { XrJoin, observeCalibration, observeFrameTimeNs } from './pkg/egoexo_web_worker.js';
 import { DeviceSocket } from './device-socket.js';
+import { clearError, connectionHooks, message, setState, showError } from './device-page.js';
 
 const DEVICE_ID_KEY = 'egoexo.observe.device-id';
 
@@ -26,8 +27,6 @@ const ui = {
   linkNote: $('link-note'),
   linkLabel: $('link-label'),
   supportNote: $('support-note'),
-  errorPanel: $('error-panel'),
-  errorMessage: $('error-message'),
   previewPanel: $('preview-panel'),
   video: $('preview-video'),
   overlay: $('preview-overlay'),
@@ -38,28 +37,14 @@ const ui = {
   cropSource: $('crop-source'),
   framesSent: $('frames-sent'),
   registration: $('registration'),
-  closeReason: $('close-reason'),
 };
 
 const nowNs = () => (performance.timeOrigin + performance.now()) * 1e6;
-const message = (error) => (error instanceof Error ? error.message : String(error));
 
 const page = { linkJoin: null, run: null };
 
-function setState(state) {
-  document.body.dataset.state = state;
-}
 
-function showError(text) {
-  ui.errorMessage.textContent = text;
-  ui.errorPanel.hidden = false;
-  setState('error');
-}
 
-function clearError() {
-  ui.errorPanel.hidden = true;
-  ui.errorMessage.textContent = '';
-}
 
 // Frames per second over the last second, from the times they happened.
 class Rate {
@@ -87,25 +72,13 @@ class Observation {
     this.relay = new DeviceSocket({
       hello: () => this.hello,
       nowNs,
-      onConnecting: (retry) => {
-        ui.connection.textContent = `connecting to ${this.joinLabel}…`;
-        setState(retry ? 'reconnecting' : 'connecting');
-      },
-      onWelcome: (welcome) => {
+      ...connectionHooks(this.joinLabel, {
+        state: 'observing',
+        doing: 'observing for',
         // The camera first, then keypoints: viewers place keypoints with it.
-        this.relay.sendText(this.calibration);
-        clearError();
-        setState('observing');
-        ui.connection.textContent = `observing for ${this.joinLabel} (room open until ${welcome.expires_at})`;
-      },
-      onClosed: (reason, code) => {
-        ui.closeReason.textContent = `${reason} (${code})`;
-      },
-      onRetry: (delay, reason) => {
-        setState('reconnecting');
-        ui.connection.textContent = `reconnecting in ${(delay / 1000).toFixed(1)} s (${reason})`;
-      },
-      onFail: (text) => this.fail(text),
+        onWelcome: () => this.relay.sendText(this.calibration),
+        onFail: (text) => this.fail(text),
+      }),
     });
     this.worker = null;
     this.workerReady = false;

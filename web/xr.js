@@ -8,6 +8,7 @@
 
 import init, { XrJoin, XrSource, xr_pose_frame } from './pkg/egoexo_web_worker.js';
 import { DeviceSocket } from './device-socket.js';
+import { clearError, connectionHooks, message, setState, showError } from './device-page.js';
 
 const DEVICE_ID_KEY = 'egoexo.xr.device-id';
 
@@ -22,13 +23,10 @@ const ui = {
   linkNote: $('link-note'),
   linkLabel: $('link-label'),
   supportNote: $('support-note'),
-  errorPanel: $('error-panel'),
-  errorMessage: $('error-message'),
   connection: $('connection'),
   tracking: $('tracking'),
   framesSent: $('frames-sent'),
   rate: $('rate'),
-  closeReason: $('close-reason'),
 };
 
 // The page's clock in nanoseconds since the Unix epoch: it stamps the frames and answers the
@@ -47,24 +45,9 @@ const page = {
   run: null, // the running stream, below
 };
 
-function setState(state) {
-  document.body.dataset.state = state;
-}
 
-function showError(message) {
-  ui.errorMessage.textContent = message;
-  ui.errorPanel.hidden = false;
-  setState('error');
-}
 
-function clearError() {
-  ui.errorPanel.hidden = true;
-  ui.errorMessage.textContent = '';
-}
 
-function message(error) {
-  return error instanceof Error ? error.message : String(error);
-}
 
 // One stream: an XR session and the socket to the relay, reconnected on retryable closes
 // while the session lasts.
@@ -77,23 +60,7 @@ class Stream {
     this.relay = new DeviceSocket({
       hello: () => hello,
       nowNs,
-      onConnecting: (retry) => {
-        ui.connection.textContent = `connecting to ${label}…`;
-        setState(retry ? 'reconnecting' : 'connecting');
-      },
-      onWelcome: (welcome) => {
-        clearError();
-        setState('streaming');
-        ui.connection.textContent = `streaming to ${label} (room open until ${welcome.expires_at})`;
-      },
-      onClosed: (reason, code) => {
-        ui.closeReason.textContent = `${reason} (${code})`;
-      },
-      onRetry: (delay, reason) => {
-        setState('reconnecting');
-        ui.connection.textContent = `reconnecting in ${(delay / 1000).toFixed(1)} s (${reason})`;
-      },
-      onFail: (text) => this.fail(text),
+      ...connectionHooks(label, { state: 'streaming', doing: 'streaming to', onFail: (text) => this.fail(text) }),
     });
     this.frameTimes = []; // performance.now() of recent XR frames, for the rate
     this.tracking = '—';

@@ -48,3 +48,38 @@ export function connectionHooks(label, { state, doing, onWelcome, onFail }) {
     onFail,
   };
 }
+
+// The room in the address's `#live=…`, if any (`XrJoin` from the wasm module): shown in the
+// form (#link-note, #link-label) instead of the code field (#code-field); a damaged link is
+// said on the error panel. Returns the join or null.
+export function linkJoinFromAddress(XrJoin) {
+  let join = null;
+  try {
+    join = XrJoin.fromFragment(location.hash) ?? null;
+  } catch (error) {
+    showError(message(error));
+  }
+  if (join) {
+    $('link-label').textContent = join.label;
+    $('link-note').hidden = false;
+    $('code-field').hidden = true;
+  }
+  return join;
+}
+
+// The device id this page last used (local storage `key`), or null.
+export function rememberedDeviceId(key) {
+  try {
+    return localStorage.getItem(key);
+  } catch {
+    return null; // storage may be off; the default id is fine
+  }
+}
+
+export function rememberDeviceId(key, id) {
+  try {
+    localStorage.setItem(key, id);
+  } catch {
+    // storage may be off; the default id is fine
+  }
+}

@@ -9,14 +9,15 @@
 
 import init, { XrJoin, observeCalibration, observeFrameTimeNs } from './pkg/egoexo_web_worker.js';
 import { DeviceSocket } from './device-socket.js';
-import { clearError, connectionHooks, message, setState, showError } from './device-page.js';
+import {
+  clearError, connectionHooks, linkJoinFromAddress, message, rememberDeviceId, rememberedDeviceId, setState, showError,
+} from './device-page.js';
 
 const DEVICE_ID_KEY = 'egoexo.observe.device-id';
 
 const $ = (id) => document.getElementById(id);
 const ui = {
   form: $('join-form'),
-  codeField: $('code-field'),
   code: $('code-input'),
   device: $('device-input'),
   target: $('target-input'),
@@ -24,8 +25,6 @@ const ui = {
   fov: $('fov-input'),
   enter: $('enter-button'),
   stop: $('stop-button'),
-  linkNote: $('link-note'),
-  linkLabel: $('link-label'),
   supportNote: $('support-note'),
   previewPanel: $('preview-panel'),
   video: $('preview-video'),
@@ -272,11 +271,7 @@ async function startObserving() {
     return;
   }
   const deviceId = ui.device.value.trim();
-  try {
-    localStorage.setItem(DEVICE_ID_KEY, deviceId);
-  } catch {
-    // storage may be off
-  }
+  rememberDeviceId(DEVICE_ID_KEY, deviceId);
   ui.enter.disabled = true;
   let stream;
   try {
@@ -302,25 +297,12 @@ async function startObserving() {
 
 async function main() {
   await init();
-  try {
-    page.linkJoin = XrJoin.fromFragment(location.hash) ?? null;
-  } catch (error) {
-    showError(message(error));
-  }
-  if (page.linkJoin) {
-    ui.linkLabel.textContent = page.linkJoin.label;
-    ui.linkNote.hidden = false;
-    ui.codeField.hidden = true;
-  }
+  page.linkJoin = linkJoinFromAddress(XrJoin);
   const params = new URLSearchParams(location.search);
   if (params.get('target')) ui.target.value = params.get('target');
   if (params.get('fov')) ui.fov.value = params.get('fov');
-  try {
-    const saved = localStorage.getItem(DEVICE_ID_KEY);
-    if (saved) ui.device.value = saved;
-  } catch {
-    // storage may be off
-  }
+  const saved = rememberedDeviceId(DEVICE_ID_KEY);
+  if (saved) ui.device.value = saved;
   if (params.get('device')) ui.device.value = params.get('device');
   ui.form.addEventListener('submit', (event) => {
     event.preventDefault();

@@ -8,20 +8,19 @@
 
 import init, { XrJoin, XrSource, xr_pose_frame } from './pkg/egoexo_web_worker.js';
 import { DeviceSocket } from './device-socket.js';
-import { clearError, connectionHooks, message, setState, showError } from './device-page.js';
+import {
+  clearError, connectionHooks, linkJoinFromAddress, message, rememberDeviceId, rememberedDeviceId, setState, showError,
+} from './device-page.js';
 
 const DEVICE_ID_KEY = 'egoexo.xr.device-id';
 
 const $ = (id) => document.getElementById(id);
 const ui = {
   form: $('join-form'),
-  codeField: $('code-field'),
   code: $('code-input'),
   device: $('device-input'),
   enter: $('enter-button'),
   stop: $('stop-button'),
-  linkNote: $('link-note'),
-  linkLabel: $('link-label'),
   supportNote: $('support-note'),
   connection: $('connection'),
   tracking: $('tracking'),
@@ -208,11 +207,7 @@ async function enterXr() {
     return;
   }
   const deviceId = ui.device.value.trim();
-  try {
-    localStorage.setItem(DEVICE_ID_KEY, deviceId);
-  } catch {
-    // storage may be off; the default id is fine
-  }
+  rememberDeviceId(DEVICE_ID_KEY, deviceId);
   ui.enter.disabled = true;
   let session;
   try {
@@ -258,22 +253,9 @@ async function detectXr() {
 
 async function main() {
   await init();
-  try {
-    page.linkJoin = XrJoin.fromFragment(location.hash) ?? null;
-  } catch (error) {
-    showError(message(error));
-  }
-  if (page.linkJoin) {
-    ui.linkLabel.textContent = page.linkJoin.label;
-    ui.linkNote.hidden = false;
-    ui.codeField.hidden = true;
-  }
-  try {
-    const saved = localStorage.getItem(DEVICE_ID_KEY);
-    if (saved) ui.device.value = saved;
-  } catch {
-    // storage may be off
-  }
+  page.linkJoin = linkJoinFromAddress(XrJoin);
+  const saved = rememberedDeviceId(DEVICE_ID_KEY);
+  if (saved) ui.device.value = saved;
   ui.form.addEventListener('submit', (event) => {
     event.preventDefault();
     if (!page.run) enterXr();

@@ -1,6 +1,7 @@
 // Shared by the end-to-end tests and the bench: Debian's Chromium through playwright-core,
 // the app's URL (served by `cargo xtask`), console capture and pixel checks.
 
+import { spawn } from 'node:child_process';
 import { mkdirSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
 import { chromium } from 'playwright-core';
@@ -8,6 +9,8 @@ import { PNG } from 'pngjs';
 
 export const APP_URL = process.env.EGOEXO_E2E_URL ?? 'http://127.0.0.1:8080/';
 export const OUT = process.env.EGOEXO_E2E_OUT ?? 'target/e2e';
+// The `egoexo` CLI the suite runs (set by `cargo xtask`).
+export const EGOEXO = process.env.EGOEXO_BIN ?? 'egoexo';
 mkdirSync(OUT, { recursive: true });
 
 // A closed network and a root user (shared/notes/toolchain.md); WebGPU through SwiftShader.
@@ -107,4 +110,18 @@ export function skeletonPixels(rgba) {
     else if (r >= 140 && g <= 0.58 * r && g >= 0.28 * r && b <= 0.3 * r) right += 1;
   }
   return { left, right };
+}
+
+// Runs `egoexo args…` in the background; resolves with its standard output once it exits 0,
+// rejects with its standard error otherwise.
+export function egoexo(args) {
+  return new Promise((resolve, reject) => {
+    const child = spawn(EGOEXO, args, { stdio: ['ignore', 'pipe', 'pipe'] });
+    let out = '';
+    let err = '';
+    child.stdout.on('data', (d) => (out += d));
+    child.stderr.on('data', (d) => (err += d));
+    child.on('error', reject);
+    child.on('exit', (code) => (code === 0 ? resolve(out) : reject(new Error(`egoexo ${args.join(' ')} exited ${code}:\n${err}`))));
+  });
 }

@@ -8,17 +8,16 @@
 // that stream in worlds of their own (`--own-worlds`) are registered within 10 s, then fused.
 
 import assert from 'node:assert/strict';
-import { execFileSync, spawn } from 'node:child_process';
+import { execFileSync } from 'node:child_process';
 import { mkdtempSync, readFileSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { after, before, describe, test } from 'node:test';
 
-import { APP_URL, decodePng, launch, openApp, skeletonPixels } from './browser.mjs';
+import { APP_URL, EGOEXO, decodePng, egoexo, launch, openApp, skeletonPixels } from './browser.mjs';
 
 const REPO = new URL('../../', import.meta.url).pathname;
 const SAMPLE = `${REPO}public/samples/cmu-14_20.egoexo`;
-const EGOEXO = process.env.EGOEXO_BIN ?? 'egoexo';
 
 let browser;
 before(async () => {
@@ -29,23 +28,13 @@ after(async () => {
 });
 
 // Runs `egoexo args…`; resolves with its stdout's last line as JSON once it exits 0.
-function egoexo(args) {
-  return new Promise((resolve, reject) => {
-    const child = spawn(EGOEXO, args, { stdio: ['ignore', 'pipe', 'pipe'] });
-    let out = '';
-    let err = '';
-    child.stdout.on('data', (d) => (out += d));
-    child.stderr.on('data', (d) => (err += d));
-    child.on('error', reject);
-    child.on('exit', (code) => {
-      if (code !== 0) return reject(new Error(`egoexo ${args.join(' ')} exited ${code}:\n${err}`));
-      try {
-        resolve(JSON.parse(out.trim().split('\n').pop()));
-      } catch (error) {
-        reject(new Error(`egoexo ${args.join(' ')} printed ${out}: ${error.message}`));
-      }
-    });
-  });
+async function egoexoJson(args) {
+  const out = await egoexo(args);
+  try {
+    return JSON.parse(out.trim().split('\n').pop());
+  } catch (error) {
+    throw new Error(`egoexo ${args.join(' ')} printed ${out}: ${error.message}`);
+  }
 }
 
 const live = (app) => app.page.evaluate(() => {
@@ -96,7 +85,7 @@ describe('live capture', () => {
     const watchLink = await app.page.getByLabel('watch link').inputValue();
     await app.waitState('live');
 
-    const replay = egoexo([
+    const replay = egoexoJson([
       // 20 s: long enough that every check below runs while it streams, even on a loaded machine.
       'live', 'replay', SAMPLE, '--url', APP_URL, '--room', code, '--duration-s', '20',
       '--disconnect', 'observer-1@4+2', '--disconnect', 'observer-2@4+2', '--clock-jump', 'wearer@7+3',
@@ -197,7 +186,7 @@ describe('live capture', () => {
     try {
       const code = await goLive(app);
       // Both observers stream in random worlds of their own (their hellos say so).
-      const replay = egoexo([
+      const replay = egoexoJson([
         'live', 'replay', walk, '--url', APP_URL, '--room', code, '--duration-s', '28', '--own-worlds', '--seed', '3',
         // observer-1's headset re-centres 12 s in: its world jumps.
         '--recentre', 'observer-1@12',
@@ -261,7 +250,7 @@ describe('live capture', () => {
     const app = await openApp(browser, '?backend=webgl2');
     try {
       const code = await goLive(app);
-      const replay = egoexo(['live', 'replay', pair, '--url', APP_URL, '--room', code, '--duration-s', '12']);
+      const replay = egoexoJson(['live', 'replay', pair, '--url', APP_URL, '--room', code, '--duration-s', '12']);
       const shown = await waitFor(app, (l) => l.frames >= 20 && (l.lastFrame?.wearers ?? []).length === 2, 'frames of both wearers');
       // The wearer whose head streamed first is the one whose facts are shown.
       const wearers = shown.lastFrame.wearers;

@@ -6,15 +6,13 @@
 // the camera's keypoints, lists it, registers it in 6 DoF and fuses its rays.
 
 import assert from 'node:assert/strict';
-import { execFileSync, spawn } from 'node:child_process';
+import { execFileSync } from 'node:child_process';
 import { mkdtempSync, readdirSync, readFileSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { after, before, describe, test } from 'node:test';
 
-import { APP_URL, launch, openApp } from './browser.mjs';
-
-const EGOEXO = process.env.EGOEXO_BIN ?? 'egoexo';
+import { APP_URL, EGOEXO, egoexo, launch, openApp } from './browser.mjs';
 
 const dir = mkdtempSync(join(tmpdir(), 'egoexo-observe-'));
 let viewerBrowser;
@@ -44,18 +42,6 @@ after(async () => {
   await viewerBrowser?.close();
   rmSync(dir, { recursive: true, force: true });
 });
-
-function egoexo(args) {
-  return new Promise((resolve, reject) => {
-    const child = spawn(EGOEXO, args, { stdio: ['ignore', 'pipe', 'pipe'] });
-    let out = '';
-    let err = '';
-    child.stdout.on('data', (d) => (out += d));
-    child.stderr.on('data', (d) => (err += d));
-    child.on('error', reject);
-    child.on('exit', (code) => (code === 0 ? resolve(out) : reject(new Error(`egoexo ${args.join(' ')} exited ${code}:\n${err}`))));
-  });
-}
 
 const live = (app) => app.page.evaluate(() => {
   const l = window.egoexo.live.snapshot();

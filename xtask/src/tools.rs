@@ -82,11 +82,13 @@ fn ensure_wasm_bindgen_cli(root: &Path) -> Result<PathBuf> {
     eprintln!("installing wasm-bindgen-cli {version} into {} (takes several minutes, once)", tools.display());
     // `--locked` fails for this CLI on crates.io today (a pinned dependency was yanked).
     // At opt-level 1: it compiles ~200 crates (ureq, brotli, walrus, …) on CI's critical path,
-    // and its own work (rewriting a few wasm modules) does not need opt-level 3.
+    // and its own work (rewriting a few wasm modules) does not need opt-level 3. Without its
+    // default `rustls-tls` feature: the test runner only speaks plain HTTP to chromedriver on
+    // loopback, and rustls + ring (C and assembly) are the slowest part of its build.
     cmd::run(
         Command::new("cargo")
             .env("CARGO_PROFILE_RELEASE_OPT_LEVEL", "1")
-            .args(["install", "wasm-bindgen-cli", "--version", &version, "--root"])
+            .args(["install", "wasm-bindgen-cli", "--no-default-features", "--version", &version, "--root"])
             .arg(&tools),
     )?;
     Ok(runner)

@@ -9,6 +9,8 @@ import { applyToggles, drawPlots, showCameraChoices } from './view.js';
 
 // Reconstructs the open session offline (ego-exo and the ego-only overlay).
 export function startReconstruction() {
+  // Playing the result being replaced would take the CPU from its replacement.
+  state.viewer?.pause();
   setBusy(true);
   setState('busy');
   showProgress('reconstructing…', 0);

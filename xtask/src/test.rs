@@ -147,17 +147,14 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
             })
         })?;
 
-    // The wasm selections, each one `cargo test` invocation, the app's crates first.
+    // The wasm selections, each one `cargo test` invocation, the app's crates first. Crates
+    // and targets of one selection build together: their shared dependencies compile once, with
+    // one feature set, instead of once per crate (each separate invocation recompiled
+    // wasm-bindgen, egoexo-core or nalgebra for its own features).
     let app_crates = WASM_APP_PROFILE_TEST_CRATES.iter().map(|krate| vec!["--package", *krate]);
-    let app_targets = std::iter::once(
-        WASM_APP_PROFILE_TEST_TARGETS
-            .iter()
-            .flat_map(|(krate, _)| ["--package", *krate])
-            .chain(WASM_APP_PROFILE_TEST_TARGETS.iter().flat_map(|(_, test)| ["--test", *test]))
-            .collect::<Vec<_>>(),
-    );
-    let crates = WASM_TEST_CRATES.iter().map(|krate| vec!["--package", *krate]);
-    let targets = WASM_TEST_TARGETS.iter().map(|(krate, test)| vec!["--package", *krate, "--test", *test]);
+    let app_targets = std::iter::once(test_targets_selection(WASM_APP_PROFILE_TEST_TARGETS));
+    let crates = std::iter::once(WASM_TEST_CRATES.iter().flat_map(|krate| ["--package", *krate]).collect());
+    let targets = std::iter::once(test_targets_selection(WASM_TEST_TARGETS));
     let wasm_selections: Vec<Vec<&str>> = app_crates.chain(app_targets).chain(crates).chain(targets).collect();
     let wasm_env = match &browser {
         Some(t) => Some(WasmTestEnv { tools: t.clone(), webdriver_json: write_webdriver_json(root, &t.chromium)? }),
@@ -298,6 +295,13 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
     println!("phases (wall clock):");
     phases.print();
     Ok(())
+}
+
+/// One `cargo test` selection of the named test targets (crate, test) of several crates.
+/// `--test` applies to every selected crate, so each name must be one crate's only.
+fn test_targets_selection<'a>(targets: &[(&'a str, &'a str)]) -> Vec<&'a str> {
+    let crates = targets.iter().flat_map(|(krate, _)| ["--package", *krate]);
+    crates.chain(targets.iter().flat_map(|(_, test)| ["--test", *test])).collect()
 }
 
 /// What the web app's browser run produced.

@@ -42,12 +42,6 @@ pub struct TestCounts {
 }
 
 impl TestCounts {
-    pub fn add(&mut self, other: TestCounts) {
-        self.passed += other.passed;
-        self.failed += other.failed;
-        self.ignored += other.ignored;
-    }
-
     fn add_line(&mut self, line: &str) {
         let Some(rest) = line.trim().strip_prefix("test result:") else { return };
         for part in rest.split(';') {
@@ -80,33 +74,6 @@ pub fn run_tests(cmd: &mut Command) -> Result<TestCounts> {
     let status = child.wait()?;
     if !status.success() {
         bail!("`{}` failed with {status} ({} passed, {} failed)", describe(cmd), counts.passed, counts.failed);
-    }
-    Ok(counts)
-}
-
-/// Runs a `cargo test`-like command with its stdout and stderr appended to `log` instead of
-/// the terminal (it runs beside other output), counting results from what it wrote.
-pub fn run_tests_logged(cmd: &mut Command, log: &std::path::Path) -> Result<TestCounts> {
-    let open = || std::fs::OpenOptions::new().create(true).append(true).open(log);
-    let mut file = open().with_context(|| format!("opening {}", log.display()))?;
-    writeln!(file, "$ {}", describe(cmd))?;
-    let status =
-        cmd.stdout(open()?).stderr(open()?).status().with_context(|| format!("could not start `{}`", describe(cmd)))?;
-    let mut counts = TestCounts::default();
-    // Only this command's lines: from its `$` line on.
-    let text = std::fs::read_to_string(log).unwrap_or_default();
-    let own = text.rfind(&format!("$ {}", describe(cmd))).map_or(text.as_str(), |at| &text[at..]);
-    for line in own.lines() {
-        counts.add_line(line);
-    }
-    if !status.success() {
-        bail!(
-            "`{}` failed with {status} ({} passed, {} failed; its output is in {})",
-            describe(cmd),
-            counts.passed,
-            counts.failed,
-            log.display()
-        );
     }
     Ok(counts)
 }

@@ -24,11 +24,11 @@ const WASM_APP_PROFILE_TEST_CRATES: &[&str] = &["egoexo-viewer"];
 const WASM_APP_PROFILE_TEST_TARGETS: &[(&str, &str)] =
     &[("egoexo-web-worker", "worker_wasm"), ("egoexo-infer", "parity_wasm")];
 
-/// Crates whose tests all run compiled to wasm32 too; built and run beside the browser suite.
+/// Crates whose tests all run compiled to wasm32 too (after the app's).
 const WASM_TEST_CRATES: &[&str] = &["egoexo-core", "egoexo-video"];
 
 /// Single test targets (crate, test) that run compiled to wasm32, for crates whose other tests
-/// need native I/O; built and run beside the browser suite.
+/// need native I/O.
 const WASM_TEST_TARGETS: &[(&str, &str)] = &[("egoexo-motion-io", "export_wasm"), ("egoexo-session", "import_wasm")];
 
 /// Timed reconstructions of the bench page during `cargo xtask test` (a figure, not a check).
@@ -153,25 +153,22 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
     // wasm-bindgen, egoexo-core or nalgebra for its own features).
     let app_crates = WASM_APP_PROFILE_TEST_CRATES.iter().map(|krate| vec!["--package", *krate]);
     let app_targets = std::iter::once(test_targets_selection(WASM_APP_PROFILE_TEST_TARGETS));
-    let app_selections: Vec<Vec<&str>> = app_crates.chain(app_targets).collect();
-    // The smaller crates' selections build and run beside the browser suite (below).
-    let small_selections: Vec<Vec<&str>> = vec![
-        WASM_TEST_CRATES.iter().flat_map(|krate| ["--package", *krate]).collect(),
-        test_targets_selection(WASM_TEST_TARGETS),
-    ];
+    let crates = std::iter::once(WASM_TEST_CRATES.iter().flat_map(|krate| ["--package", *krate]).collect());
+    let targets = std::iter::once(test_targets_selection(WASM_TEST_TARGETS));
+    let wasm_selections: Vec<Vec<&str>> = app_crates.chain(app_targets).chain(crates).chain(targets).collect();
     let wasm_env = match &browser {
         Some(t) => Some(WasmTestEnv { tools: t.clone(), webdriver_json: write_webdriver_json(root, &t.chromium)? }),
         None => None,
     };
 
-    // The app's wasm test builds and `dist/` compile while the native tests run: a test binary with
+    // The wasm test builds and `dist/` compile while the native tests run: a test binary with
     // one long test leaves a core idle, and the wasm builds lock another profile's folder. The
     // browsers start only once the native tests are done.
     let (native_counts, built_app) =
-        phases.time("native tests, with the app's wasm test builds and dist/ beside them", || {
+        phases.time("native tests, with the wasm test builds and dist/ beside them", || {
             std::thread::scope(|scope| {
                 let wasm_build = wasm_env.as_ref().map(|env| {
-                    let selections = &app_selections;
+                    let selections = &wasm_selections;
                     scope.spawn(move || -> Result<Vec<web::ModuleSize>> {
                         for selection in selections {
                             cmd::run(env.cargo_test(selection).arg("--no-run"))?;
@@ -202,13 +199,14 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
     let wasm_counts = match (&wasm_env, built_app) {
         (Some(env), Some(sizes)) => {
             let mut total = TestCounts::default();
-            for selection in &app_selections {
+            for selection in &wasm_selections {
                 let name = format!("wasm tests: {}", selection.join(" "));
                 let counts = phases.time(name, || cmd::run_tests(&mut env.cargo_test(selection)))?;
-                total.add(counts);
+                total.passed += counts.passed;
+                total.failed += counts.failed;
+                total.ignored += counts.ignored;
             }
-            let (app, small) = run_web_app(root, env, &small_selections, sizes, &mut phases)?;
-            total.add(small);
+            let app = run_web_app(root, &env.tools, sizes, &mut phases)?;
             Some((total, app))
         }
         _ => None,
@@ -323,31 +321,14 @@ struct WebAppRun {
 
 /// Runs the Playwright suite and the bench page against `dist/` (built beside the native
 /// tests, with the models from `models/` or `EGOEXO_MODELS`; `sizes` are its modules').
-///
-/// The wasm tests of `small_selections` build and run beside the Playwright suite at the
-/// lowest CPU priority (`nice -n 19`): the suite leaves a third of the two cores idle (its
-/// pages wait on the wall clock, the relay and the GPU process), and those builds had the
-/// cores to themselves after the native tests before. Their output goes to
-/// `target/xtask/wasm-tests-beside-e2e.log`, printed once they are done. The benches after the
-/// suite run alone.
 fn run_web_app(
     root: &Path,
-    env: &WasmTestEnv,
-    small_selections: &[Vec<&str>],
+    t: &tools::BrowserTestTools,
     sizes: Vec<web::ModuleSize>,
     phases: &mut Phases,
-) -> Result<(WebAppRun, TestCounts)> {
-    let run = e2e::BrowserRun { chromium: env.tools.chromium.clone(), out: root.join("target").join("e2e") };
-    let log = root.join("target").join("xtask").join("wasm-tests-beside-e2e.log");
-    let (e2e, small) =
-        phases.time("web app: end to end (Playwright), the smaller crates' wasm tests beside it (nice 19)", || {
-            std::thread::scope(|scope| {
-                let small = scope.spawn(|| run_logged_selections(env, small_selections, &log));
-                let e2e = e2e::run_suite(root, &run);
-                let small = small.join().map_err(|_| anyhow::anyhow!("the wasm tests beside the suite panicked"))?;
-                Ok((e2e?, small?))
-            })
-        })?;
+) -> Result<WebAppRun> {
+    let run = e2e::BrowserRun { chromium: t.chromium.clone(), out: root.join("target").join("e2e") };
+    let e2e = phases.time("web app: end to end (Playwright)", || e2e::run_suite(root, &run))?;
     let bench = phases.time("web app: bench page", || e2e::run_bench(root, &run, TEST_BENCH_RUNS))?;
     let live = phases.time("web app: live bench", || e2e::run_live_bench(root, &run, TEST_LIVE_BENCH_SECONDS))?;
     let relay =
@@ -355,27 +336,7 @@ fn run_web_app(
     let first_skeleton =
         std::fs::read(run.out.join("first-skeleton.json")).ok().and_then(|bytes| serde_json::from_slice(&bytes).ok());
     let hour = std::fs::read(run.out.join("hour.json")).ok().and_then(|bytes| serde_json::from_slice(&bytes).ok());
-    Ok((WebAppRun { sizes, e2e, bench, live, relay, first_skeleton, hour }, small))
-}
-
-/// Builds and runs each selection's wasm tests at `nice -n 19`, output to `log` (printed at
-/// the end); the counts over all of them.
-fn run_logged_selections(env: &WasmTestEnv, selections: &[Vec<&str>], log: &Path) -> Result<TestCounts> {
-    let _ = std::fs::remove_file(log);
-    let mut total = TestCounts::default();
-    let mut result = Ok(());
-    for selection in selections {
-        match cmd::run_tests_logged(&mut env.cargo_test_at_lowest_priority(selection), log) {
-            Ok(counts) => total.add(counts),
-            Err(e) => {
-                result = Err(e);
-                break;
-            }
-        }
-    }
-    let text = std::fs::read_to_string(log).unwrap_or_default();
-    println!("== wasm tests beside the browser suite ({}) ==\n{text}", log.display());
-    result.map(|()| total)
+    Ok(WebAppRun { sizes, e2e, bench, live, relay, first_skeleton, hour })
 }
 
 /// What a wasm `cargo test` needs: the runner, the browser and its capabilities file.
@@ -388,18 +349,7 @@ impl WasmTestEnv {
     /// `cargo test` of `selection` for wasm32 in the app's profile, run in headless Chromium.
     /// The build (`--no-run`) and the run get the same environment, so the run rebuilds nothing.
     fn cargo_test(&self, selection: &[&str]) -> Command {
-        self.with_wasm_test_args(Command::new("cargo"), selection)
-    }
-
-    /// [`Self::cargo_test`] at the lowest CPU priority (`nice -n 19`, inherited by the browser
-    /// it starts): it takes only the CPU that the work beside it leaves idle.
-    fn cargo_test_at_lowest_priority(&self, selection: &[&str]) -> Command {
-        let mut c = Command::new("nice");
-        c.args(["-n", "19", "cargo"]);
-        self.with_wasm_test_args(c, selection)
-    }
-
-    fn with_wasm_test_args(&self, mut c: Command, selection: &[&str]) -> Command {
+        let mut c = Command::new("cargo");
         c.arg("test")
             .args(["--profile", web::WASM_PROFILE])
             .args(selection)

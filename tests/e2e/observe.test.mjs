@@ -82,6 +82,8 @@ describe('observer page', () => {
     const replay = egoexo(['live', 'replay', join(dir, 'walk.egoexo'), '--url', APP_URL, '--room', code,
       '--no-observers', '--start-at-unix-ms', firstFrameMs.toFixed(3),
       '--jitter-ms', '0', '--clock-spread-s', '0', '--drift-ppm', '0']);
+    let replayEnded = false;
+    replay.then(() => { replayEnded = true; }, () => { replayEnded = true; });
 
     // The camera page finds the wearer and draws them.
     const found = await waitFor('detections on the camera page', () => camera.page.evaluate(() => Number(document.body.dataset.detections)), (n) => n >= 30);
@@ -116,7 +118,10 @@ describe('observer page', () => {
       const distance = film.camera.mean_distance_to_wearer_m;
       sub.diagnostic(`the camera placed ${(off * 100).toFixed(1)} cm from where it filmed, ${(100 * off / distance).toFixed(1)} % of its ${distance.toFixed(1)} m to the wearer`);
       assert.ok(off < 0.1 * distance, `placed at ${world.translation_m}, filmed from ${truth}, ${distance} m from the wearer`);
-      await waitFor('its rays fused', () => live(app), (l) => (l.lastFrame?.exo_observers ?? []).includes('tripod'), 60_000);
+      // Until the replay ends: after it, no frame is reconstructed.
+      const fused = await waitFor('its rays fused or the replay ended', async () => ({ l: await live(app), ended: replayEnded }),
+        ({ l, ended }) => ended || (l.lastFrame?.exo_observers ?? []).includes('tripod'), 60_000);
+      assert.ok((fused.l.lastFrame?.exo_observers ?? []).includes('tripod'), `the replay ended before its rays were fused: ${JSON.stringify(fused.l.lastFrame)}`);
     });
     await replay;
     assert.deepEqual(camera.errors, []);

@@ -3,25 +3,17 @@
 // the address is kept saying what is shown, so that a copied link opens the same thing.
 
 import { fragment_with_time, parse_fragment } from './pkg/egoexo_viewer.js';
-import { $, clearError, fail, setBusy, setState, showError, showProgress, state } from './page.js';
+import { $, clearError, fail, pauseShown, setBusy, setState, showError, showProgress, state } from './page.js';
 import { fetchShare } from './share.js';
 
 // Assets (samples among them) live beside this script, under the build's versioned folder.
 const SAMPLES_URL = new URL('samples/samples.json', import.meta.url);
 
-// The reconstruction on screen is about to be replaced: stop playing it, so that drawing it
-// does not take the CPU from the import and reconstruction (measured in the e2e suite with a
-// software renderer: the detector step of the next session took 30 s instead of 4.5 s per
-// observer while the previous one played).
-function pausePrevious() {
-  state.viewer?.pause();
-}
-
 // Starts an import: `open(client)` sends the request (its bytes go to the worker).
 function startJob(open) {
   if (state.busy) return;
   clearError();
-  pausePrevious();
+  pauseShown();
   setBusy(true);
   setState('busy');
   showProgress('starting…', null);
@@ -95,7 +87,7 @@ export async function openUrl(address) {
 // `#share=<id>.<key>`: fetch the sealed share and open it in the worker.
 export async function openShareLink(share) {
   clearError();
-  pausePrevious();
+  pauseShown();
   setBusy(true);
   setState('busy');
   showProgress('fetching the share…', null);

@@ -4,13 +4,12 @@
 // the participant shown.
 
 import { participant_colour } from './pkg/egoexo_viewer.js';
-import { $, fail, markOnce, setBusy, setState, showProgress, state } from './page.js';
+import { $, fail, markOnce, pauseShown, setBusy, setState, showProgress, state } from './page.js';
 import { applyToggles, drawPlots, showCameraChoices } from './view.js';
 
 // Reconstructs the open session offline (ego-exo and the ego-only overlay).
 export function startReconstruction() {
-  // Playing the result being replaced would take the CPU from its replacement.
-  state.viewer?.pause();
+  pauseShown();
   setBusy(true);
   setState('busy');
   showProgress('reconstructing…', 0);

@@ -116,7 +116,7 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
     warn_if_disk_low(root);
     let mut phases = Phases::default();
     // The downloads (pip's wheels, npm's packages, Debian's Chromium: network and disk) run
-    // beside the CPU-bound work (building wasm-bindgen-test-runner, then the native tests), so
+    // beside the CPU-bound work (building the native tests and wasm-bindgen-test-runner), so
     // a fresh machine waits for whichever is longer instead of both. A missing tool still
     // fails before any test runs.
     let (browser, native_tools) =
@@ -128,12 +128,14 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
                     let chromium = if wasm { Some(tools::ensure_chromium()?) } else { None };
                     Ok((native_tools, chromium))
                 });
-                let runner = if wasm { Some(tools::ensure_wasm_test_runner(root)) } else { None };
+                // The native build includes wasm-bindgen-test-runner (package
+                // `xtask-wasm-bindgen`), so the runner is found after it, not built alone.
                 let built = if native {
                     cmd::run(Command::new("cargo").args(["test", "--workspace", "--no-run", "--quiet"]))
                 } else {
                     Ok(())
                 };
+                let runner = if wasm && built.is_ok() { Some(tools::ensure_wasm_test_runner(root)) } else { None };
                 let (native_tools, chromium) =
                     downloads.join().map_err(|_| anyhow::anyhow!("the tool downloads panicked"))??;
                 built?;

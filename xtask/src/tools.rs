@@ -63,8 +63,9 @@ pub fn locked_wasm_bindgen_version(root: &Path) -> Result<String> {
     bail!("Cargo.lock has no wasm-bindgen package")
 }
 
-/// `wasm-bindgen-test-runner` matching Cargo.lock: from PATH if its version matches, else from
-/// the cache under `target/tools`, else installed there with `cargo install`.
+/// `wasm-bindgen-test-runner` matching Cargo.lock: from PATH if its version matches, else the
+/// workspace's own build of it (package `xtask-wasm-bindgen`, in `target/debug`; `cargo test
+/// --workspace` builds it with the rest), built now if missing or stale.
 fn ensure_wasm_bindgen_cli(root: &Path) -> Result<PathBuf> {
     let version = locked_wasm_bindgen_version(root)?;
     let wanted = format!("wasm-bindgen {version}");
@@ -73,24 +74,19 @@ fn ensure_wasm_bindgen_cli(root: &Path) -> Result<PathBuf> {
     {
         return Ok(path);
     }
-    let tools = root.join("target").join("tools").join(format!("wasm-bindgen-cli-{version}"));
-    let runner = tools.join("bin").join("wasm-bindgen-test-runner");
-    let cli = tools.join("bin").join("wasm-bindgen");
-    if runner.exists() && cmd::output(Command::new(&cli).arg("--version")).as_deref() == Some(wanted.as_str()) {
+    let bin = root.join("target").join("debug");
+    let runner = bin.join("wasm-bindgen-test-runner");
+    let cli = bin.join("wasm-bindgen");
+    let built =
+        || runner.exists() && cmd::output(Command::new(&cli).arg("--version")).as_deref() == Some(wanted.as_str());
+    if built() {
         return Ok(runner);
     }
-    eprintln!("installing wasm-bindgen-cli {version} into {} (takes several minutes, once)", tools.display());
-    // `--locked` fails for this CLI on crates.io today (a pinned dependency was yanked).
-    // At opt-level 1: it compiles ~200 crates (ureq, brotli, walrus, …) on CI's critical path,
-    // and its own work (rewriting a few wasm modules) does not need opt-level 3. Without its
-    // default `rustls-tls` feature: the test runner only speaks plain HTTP to chromedriver on
-    // loopback, and rustls + ring (C and assembly) are the slowest part of its build.
-    cmd::run(
-        Command::new("cargo")
-            .env("CARGO_PROFILE_RELEASE_OPT_LEVEL", "1")
-            .args(["install", "wasm-bindgen-cli", "--no-default-features", "--version", &version, "--root"])
-            .arg(&tools),
-    )?;
+    eprintln!("building wasm-bindgen-cli {version} (package xtask-wasm-bindgen; several minutes, once)");
+    cmd::run(Command::new("cargo").args(["build", "--quiet", "--package", "xtask-wasm-bindgen", "--bins"]))?;
+    if !built() {
+        bail!("{} is not `{wanted}` after building package xtask-wasm-bindgen", cli.display());
+    }
     Ok(runner)
 }
 

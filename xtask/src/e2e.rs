@@ -15,6 +15,8 @@ use crate::{serve, tools};
 #[derive(Clone, Debug)]
 pub struct BrowserRun {
     pub chromium: PathBuf,
+    /// The `egoexo` binary: it serves the app and the tests run its commands.
+    pub egoexo: PathBuf,
     /// Screenshots and reports go here (`target/e2e`).
     pub out: PathBuf,
 }
@@ -27,7 +29,7 @@ impl BrowserRun {
             .env("EGOEXO_CHROMIUM", &self.chromium)
             .env("EGOEXO_E2E_OUT", &self.out)
             // The CLI tests (`egoexo share` → the page) use the binary the server runs from.
-            .env("EGOEXO_BIN", root.join("target").join("debug").join("egoexo"));
+            .env("EGOEXO_BIN", &self.egoexo);
         // The video export's check decodes the MP4 with PyAV from the tests' venv.
         let python = tools::venv_python(root);
         if python.is_file() {
@@ -42,7 +44,7 @@ impl BrowserRun {
         if store.exists() {
             std::fs::remove_dir_all(&store).with_context(|| format!("clearing {}", store.display()))?;
         }
-        serve::spawn(root, &root.join("dist"), &store, "127.0.0.1:0")
+        serve::spawn(&self.egoexo, &root.join("dist"), &store, "127.0.0.1:0")
     }
 }
 
@@ -202,11 +204,10 @@ pub fn run_live_bench(root: &Path, run: &BrowserRun, seconds: u32) -> Result<ser
 
 /// The relay under load on loopback (`egoexo live load`, which starts its own server):
 /// `streams` device streams (10 rooms) at 30 Hz for `seconds`. Returns its JSON report.
-pub fn run_relay_load(root: &Path, streams: usize, seconds: u32) -> Result<serde_json::Value> {
-    let bin = root.join("target").join("debug").join("egoexo");
+pub fn run_relay_load(egoexo: &Path, streams: usize, seconds: u32) -> Result<serde_json::Value> {
     let rooms = 10.min(streams.max(1));
     let out = cmd::output_checked(
-        Command::new(bin)
+        Command::new(egoexo)
             .args(["live", "load", "--rooms", &rooms.to_string(), "--devices-per-room"])
             .arg((streams / rooms).max(1).to_string())
             .args(["--duration-s", &seconds.to_string()]),

@@ -125,7 +125,8 @@ fn main() -> Result<()> {
         Command::Serve { app, port } => {
             app.build(&root)?;
             let store = root.join("target").join("shares");
-            let running = serve::spawn(&root, &root.join("dist"), &store, &format!("127.0.0.1:{port}"))?;
+            let egoexo = serve::build_server(&root)?;
+            let running = serve::spawn(&egoexo, &root.join("dist"), &store, &format!("127.0.0.1:{port}"))?;
             println!("egoexo is at {} (shares in {}; Ctrl-C to stop)", running.url, store.display());
             running.wait()
         }
@@ -133,7 +134,8 @@ fn main() -> Result<()> {
         Command::BenchWeb { app, runs } => {
             app.build(&root)?;
             let chromium = tools::ensure_browser_test_tools(&root)?.chromium;
-            let run = e2e::BrowserRun { chromium, out: root.join("target").join("e2e") };
+            let egoexo = serve::build_server(&root)?;
+            let run = e2e::BrowserRun { chromium, egoexo, out: root.join("target").join("e2e") };
             let web = e2e::run_bench(&root, &run, runs)?;
             let models = web::models_dir(&root, app.models.as_deref())?;
             let native = e2e::run_native_reference(&root, &models, runs)?;

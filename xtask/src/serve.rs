@@ -35,7 +35,10 @@ impl Running {
     }
 }
 
-/// Builds the `egoexo` binary (dev profile: the same build the native tests use).
+/// Builds the `egoexo` binary (dev profile). Its dependencies' features are those of
+/// `egoexo-cli` alone, which differ from a `cargo test --workspace` build's: after that build,
+/// use the `egoexo` it made instead ([`crate::test`] does), or cargo compiles much of the
+/// workspace again (tract included) for this one binary.
 pub fn build_server(root: &Path) -> Result<PathBuf> {
     cmd::run(Command::new("cargo").args(["build", "--quiet", "-p", "egoexo-cli"]))?;
     let binary = root.join("target").join("debug").join("egoexo");
@@ -45,12 +48,11 @@ pub fn build_server(root: &Path) -> Result<PathBuf> {
     Ok(binary)
 }
 
-/// Starts `egoexo serve` on `dist` with shares in `store`, listening on `listen`
-/// (`127.0.0.1:0` picks a free port), and waits for its address.
-pub fn spawn(root: &Path, dist: &Path, store: &Path, listen: &str) -> Result<Running> {
-    let binary = build_server(root)?;
+/// Starts `binary serve` (the `egoexo` CLI, [`build_server`]) on `dist` with shares in
+/// `store`, listening on `listen` (`127.0.0.1:0` picks a free port), and waits for its address.
+pub fn spawn(binary: &Path, dist: &Path, store: &Path, listen: &str) -> Result<Running> {
     std::fs::create_dir_all(store)?;
-    let mut child = Command::new(&binary)
+    let mut child = Command::new(binary)
         .args(["serve", "--listen", listen, "--dist"])
         .arg(dist)
         .arg("--store")

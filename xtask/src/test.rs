@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 
 use crate::cmd::{self, TestCounts};
-use crate::{e2e, tools, web};
+use crate::{e2e, serve, tools, web};
 
 /// Every wasm test build uses the web app's profile ([`web::WASM_PROFILE`]): one compiled copy
 /// of the shared dependencies (serde, glam, zip, tract, wgpu, …) serves the tests and `dist/`,
@@ -208,7 +208,15 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
                 total.failed += counts.failed;
                 total.ignored += counts.ignored;
             }
-            let app = run_web_app(root, &env.tools, sizes, &mut phases)?;
+            // The `egoexo` the native build made; `cargo build -p egoexo-cli` would resolve
+            // other features for its dependencies and compile much of the workspace again.
+            let built_by_native_tests = root.join("target").join("debug").join("egoexo");
+            let egoexo = if native && built_by_native_tests.is_file() {
+                built_by_native_tests
+            } else {
+                serve::build_server(root)?
+            };
+            let app = run_web_app(root, &env.tools, egoexo, sizes, &mut phases)?;
             Some((total, app))
         }
         _ => None,
@@ -326,15 +334,16 @@ struct WebAppRun {
 fn run_web_app(
     root: &Path,
     t: &tools::BrowserTestTools,
+    egoexo: std::path::PathBuf,
     sizes: Vec<web::ModuleSize>,
     phases: &mut Phases,
 ) -> Result<WebAppRun> {
-    let run = e2e::BrowserRun { chromium: t.chromium.clone(), out: root.join("target").join("e2e") };
+    let run = e2e::BrowserRun { chromium: t.chromium.clone(), egoexo, out: root.join("target").join("e2e") };
     let e2e = phases.time("web app: end to end (Playwright)", || e2e::run_suite(root, &run))?;
     let bench = phases.time("web app: bench page", || e2e::run_bench(root, &run, TEST_BENCH_RUNS))?;
     let live = phases.time("web app: live bench", || e2e::run_live_bench(root, &run, TEST_LIVE_BENCH_SECONDS))?;
-    let relay =
-        phases.time("relay load (50 streams × 30 Hz)", || e2e::run_relay_load(root, 50, TEST_RELAY_LOAD_SECONDS))?;
+    let relay = phases
+        .time("relay load (50 streams × 30 Hz)", || e2e::run_relay_load(&run.egoexo, 50, TEST_RELAY_LOAD_SECONDS))?;
     let first_skeleton =
         std::fs::read(run.out.join("first-skeleton.json")).ok().and_then(|bytes| serde_json::from_slice(&bytes).ok());
     let hour = std::fs::read(run.out.join("hour.json")).ok().and_then(|bytes| serde_json::from_slice(&bytes).ok());

@@ -150,6 +150,76 @@ struct OpenSession {
     detection: Vec<protocol::DetectionSummary>,
 }
 
+/// What the worker has open ([`SessionWorker`]'s modes); opening anything replaces it whole.
+#[derive(Debug, Default)]
+enum Opened {
+    #[default]
+    Nothing,
+    /// One wearer: a recording, a kept live take, or a share of one.
+    Wearer(Shown),
+    /// A capture of several participants, or a share of one: everyone's results wait in the
+    /// group; `Shown` is the shown participant's session and results.
+    Capture(group::Group, Shown),
+}
+
+/// The shown wearer's session and results. A share opened without its recording has
+/// results and no session; a session not yet reconstructed has no results.
+#[derive(Debug, Default)]
+struct Shown {
+    session: Option<OpenSession>,
+    results: Option<Results>,
+}
+
+impl Opened {
+    /// One wearer's `session` newly opened (no results yet).
+    fn wearer(session: OpenSession) -> Self {
+        Opened::Wearer(Shown { session: Some(session), results: None })
+    }
+
+    fn shown(&self) -> Option<&Shown> {
+        match self {
+            Opened::Nothing => None,
+            Opened::Wearer(shown) | Opened::Capture(_, shown) => Some(shown),
+        }
+    }
+
+    fn shown_mut(&mut self) -> Option<&mut Shown> {
+        match self {
+            Opened::Nothing => None,
+            Opened::Wearer(shown) | Opened::Capture(_, shown) => Some(shown),
+        }
+    }
+
+    /// The shown wearer's session, if one is open.
+    fn session(&self) -> Option<&OpenSession> {
+        self.shown()?.session.as_ref()
+    }
+
+    fn session_mut(&mut self) -> Option<&mut OpenSession> {
+        self.shown_mut()?.session.as_mut()
+    }
+
+    /// What is shown, if anything is reconstructed or opened from a share.
+    fn results(&self) -> Option<&Results> {
+        self.shown()?.results.as_ref()
+    }
+
+    /// The capture of several participants, if one is open.
+    fn group(&self) -> Option<&group::Group> {
+        match self {
+            Opened::Capture(group, _) => Some(group),
+            _ => None,
+        }
+    }
+
+    fn group_mut(&mut self) -> Option<&mut group::Group> {
+        match self {
+            Opened::Capture(group, _) => Some(group),
+            _ => None,
+        }
+    }
+}
+
 /// What is shown: a reconstruction made here, or one opened from a share.
 #[derive(Clone, Debug)]
 struct Results {
@@ -196,10 +266,11 @@ impl std::fmt::Debug for WorkerClock {
 
 /// The worker: models, the open session and its reconstructions.
 ///
-/// **Modes.** One session open (a recording of one wearer), or a capture of several
-/// participants (`group` set): then `session` and `results` are always the *shown*
-/// participant's, and the others' results wait in the group. Every method below works on the
-/// shown one unless it names a participant.
+/// **Modes** (`Opened`): nothing open; one wearer (a recording, a kept take or a share of
+/// one); or a capture of several participants, whose group holds everyone's results while
+/// the *shown* participant's session and results are the ones every method below works on,
+/// unless it names a participant. In either mode a share opened without its recording has
+/// results and no session.
 ///
 /// **Call order.**
 /// 1. `load_models` (and `load_detector` once a session needs it: `observers_needing_detection`).
@@ -220,11 +291,8 @@ pub struct SessionWorker {
     /// The keypoint detector, loaded when a session first needs it.
     detector: Option<Arc<KeypointDetector>>,
     manifest: Option<Manifest>,
-    session: Option<OpenSession>,
-    results: Option<Results>,
-    /// A capture of several participants: everyone's results; `session` and `results` are
-    /// the shown participant's.
-    group: Option<group::Group>,
+    /// The open session or capture and what is shown of it.
+    opened: Opened,
     /// Times each stage of a job when set ([`ReconstructionSummary::timings`]).
     clock: WorkerClock,
 }
@@ -347,9 +415,7 @@ impl SessionWorker {
     /// A capture of several participants opens with the first one to reconstruct shown
     /// ([`SessionSummary::participants`]).
     pub fn import(&mut self, tree: &FileTree) -> Result<SessionSummary, WorkerError> {
-        self.session = None;
-        self.results = None;
-        self.group = None;
+        self.opened = Opened::Nothing;
         let mut timings = StageTimings::default();
         let imported =
             self.timed(&mut timings, TimedStage::Import, || import_capture(tree, &ImportOptions::default()))?;
@@ -367,16 +433,20 @@ impl SessionWorker {
         mut imported: Imported,
         mut timings: StageTimings,
     ) -> Result<SessionSummary, WorkerError> {
-        self.session = None;
-        self.results = None;
-        self.group = None;
+        self.opened = Opened::Nothing;
         let fps = self.fps();
         self.timed(&mut timings, TimedStage::Register, || self.register_observers(&mut imported))?;
         let aligned = self.timed(&mut timings, TimedStage::Align, || align_for(&imported, fps))?;
         let videos = BTreeMap::new();
         let summary = session_summary(&imported, &aligned, &videos);
-        self.session =
-            Some(OpenSession { imported, aligned, summary: summary.clone(), timings, videos, detection: Vec::new() });
+        self.opened = Opened::wearer(OpenSession {
+            imported,
+            aligned,
+            summary: summary.clone(),
+            timings,
+            videos,
+            detection: Vec::new(),
+        });
         Ok(summary)
     }
 
@@ -401,7 +471,7 @@ impl SessionWorker {
 
     /// The open session on the models' timeline, if any.
     pub fn aligned_session(&self) -> Option<&AlignedSession> {
-        self.session.as_ref().map(|s| &s.aligned)
+        self.opened.session().map(|s| &s.aligned)
     }
 
     /// The frame rate the models were trained at (the default timeline rate without models).
@@ -412,7 +482,7 @@ impl SessionWorker {
     /// The open session's summary as it is now (after a detector step it counts the found
     /// keypoints).
     pub fn session_summary(&self) -> Option<SessionSummary> {
-        self.session.as_ref().map(|open| open.summary.clone())
+        self.opened.session().map(|open| open.summary.clone())
     }
 }
 

@@ -7,7 +7,7 @@ impl SessionWorker {
     /// Observers of the open session whose keypoints the detector step finds first (video
     /// and no keypoints), by id.
     pub fn observers_needing_detection(&self) -> Vec<String> {
-        let Some(open) = &self.session else { return Vec::new() };
+        let Some(open) = self.opened.session() else { return Vec::new() };
         observers_needing_detection(&open.imported.session)
             .into_iter()
             .map(|o| open.imported.session.observers[o].id.clone())
@@ -49,7 +49,7 @@ impl SessionWorker {
         };
         let engine = self.models.as_ref().ok_or(WorkerError::NoModels)?.offline();
         let fps = self.fps();
-        let open = self.session.as_mut().ok_or(WorkerError::NoSession)?;
+        let open = self.opened.session_mut().ok_or(WorkerError::NoSession)?;
         if open.aligned.timeline.fps != fps {
             open.aligned = align_for(&open.imported, fps)?;
         }
@@ -74,7 +74,7 @@ impl SessionWorker {
     /// jobs skip the step) and returns what was done per observer.
     pub fn finish_detection(&mut self, task: DetectionTask) -> Result<Vec<protocol::DetectionSummary>, WorkerError> {
         let fps = self.fps();
-        let open = self.session.as_mut().ok_or(WorkerError::NoSession)?;
+        let open = self.opened.session_mut().ok_or(WorkerError::NoSession)?;
         let mut summaries = Vec::new();
         let mut found = Vec::new();
         for (o, track, summary) in task.finish() {
@@ -91,7 +91,7 @@ impl SessionWorker {
             self.keep_detected_keypoints(&id, track);
         }
         let summary = self.with_group(summary);
-        self.session.as_mut().ok_or(WorkerError::NoSession)?.summary = summary;
+        self.opened.session_mut().ok_or(WorkerError::NoSession)?.summary = summary;
         Ok(summaries)
     }
 }

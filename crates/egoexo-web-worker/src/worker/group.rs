@@ -166,16 +166,14 @@ impl SessionWorker {
         imported: ImportedCapture,
         timings: StageTimings,
     ) -> Result<SessionSummary, WorkerError> {
-        self.session = None;
-        self.results = None;
-        self.group = None;
+        self.opened = Opened::Nothing;
         if imported.capture.is_one_session() {
             let wearer = imported.capture.reconstructed().next().ok_or(WorkerError::NoSession)?;
             let session = imported.capture.session_for(wearer)?;
             let imported = Imported { session, source: imported.source, warnings: imported.warnings };
             let videos = tree.map_or(Ok(BTreeMap::new()), |tree| session_videos(tree, &imported))?;
             self.open_imported_timed(imported, timings)?;
-            let open = self.session.as_mut().ok_or(WorkerError::NoSession)?;
+            let open = self.opened.session_mut().ok_or(WorkerError::NoSession)?;
             open.videos = videos;
             open.summary = session_summary(&open.imported, &open.aligned, &open.videos);
             return Ok(open.summary.clone());
@@ -193,39 +191,42 @@ impl SessionWorker {
         }
         let group = Group::new(imported, videos);
         let first = group.selected;
-        self.group = Some(group);
+        self.opened = Opened::Capture(group, Shown::default());
         self.open_participant(first, timings)
     }
 
     /// Opens participant `index` of the group as the session (reconstructions kept).
     fn open_participant(&mut self, index: usize, mut timings: StageTimings) -> Result<SessionSummary, WorkerError> {
         let fps = self.fps();
-        let group = self.group.as_mut().ok_or(WorkerError::NoSession)?;
+        let group = self.opened.group_mut().ok_or(WorkerError::NoSession)?;
         group.selected = index;
-        let group = self.group.as_ref().ok_or(WorkerError::NoSession)?;
-        let Some(capture) = &group.capture else {
-            self.session = None;
+        if group.capture.is_none() {
+            // A share's participants without the recording: nothing to open.
+            self.opened.shown_mut().ok_or(WorkerError::NoSession)?.session = None;
             return Err(WorkerError::NoSession);
-        };
+        }
+        let group = self.opened.group().ok_or(WorkerError::NoSession)?;
+        let capture = group.capture.as_ref().ok_or(WorkerError::NoSession)?;
         let session = capture.session_for(index)?;
         let imported = Imported { session, source: group.source, warnings: group.warnings.clone() };
         let aligned = self.timed(&mut timings, TimedStage::Align, || align_for(&imported, fps))?;
         let summary = self.with_group(session_summary(&imported, &aligned, &group.videos));
-        self.session = Some(OpenSession {
+        let open = OpenSession {
             imported,
             aligned,
             summary: summary.clone(),
             timings,
             videos: group.videos.clone(),
             detection: Vec::new(),
-        });
+        };
+        self.opened.shown_mut().ok_or(WorkerError::NoSession)?.session = Some(open);
         Ok(summary)
     }
 
     /// The participants a reconstruction of the open capture reconstructs, in order (empty
     /// for a one-wearer session).
     pub fn participants_to_reconstruct(&self) -> Vec<String> {
-        let Some(group) = &self.group else { return Vec::new() };
+        let Some(group) = self.opened.group() else { return Vec::new() };
         if group.capture.is_none() {
             return Vec::new();
         }
@@ -235,7 +236,7 @@ impl SessionWorker {
     /// `summary` (of the open session) with the capture's participants and who is shown, when
     /// a capture of several is open.
     pub(super) fn with_group(&self, mut summary: SessionSummary) -> SessionSummary {
-        if let Some(group) = &self.group {
+        if let Some(group) = self.opened.group() {
             summary.participants = group.participants.clone();
             summary.participant = Some(group.participants[group.selected].id.clone());
         }
@@ -271,7 +272,7 @@ impl SessionWorker {
     /// Opens participant `id` as the session for the next steps of a capture's
     /// reconstruction (the detector step, the job).
     pub fn open_participant_for_reconstruction(&mut self, id: &str) -> Result<(), WorkerError> {
-        let index = self.group.as_ref().ok_or(WorkerError::NoSession)?.index_of(id)?;
+        let index = self.opened.group().ok_or(WorkerError::NoSession)?.index_of(id)?;
         self.open_participant(index, StageTimings::default()).map(|_| ())
     }
 
@@ -280,7 +281,7 @@ impl SessionWorker {
     /// the association's figures per camera (empty when every camera's people are named).
     pub fn associate_people(&mut self) -> Result<Vec<AssociationSummary>, WorkerError> {
         let fps = self.fps();
-        let group = self.group.as_mut().ok_or(WorkerError::NoSession)?;
+        let group = self.opened.group_mut().ok_or(WorkerError::NoSession)?;
         if let Some(done) = &group.association {
             return Ok(done.clone());
         }
@@ -313,14 +314,14 @@ impl SessionWorker {
 
     /// Stores the shown participant's results in the group (after the scene is serialised).
     pub(super) fn store_participant_results(&mut self) {
-        let (Some(group), Some(results)) = (&mut self.group, &self.results) else { return };
+        let Opened::Capture(group, Shown { results: Some(results), .. }) = &mut self.opened else { return };
         group.results.insert(group.selected, results.clone());
     }
 
     /// What is shown of a capture: the shown participant's results with everyone's bodies in
     /// the scene and every participant's row in the summary. `None` for a one-wearer session.
     pub fn show_group(&mut self) -> Result<Option<(ReconstructionSummary, Vec<u8>)>, WorkerError> {
-        let Some(group) = &self.group else { return Ok(None) };
+        let Some(group) = self.opened.group() else { return Ok(None) };
         let shown = group.results.get(&group.selected).ok_or(WorkerError::NoReconstruction)?;
         let parse = |json: &[u8]| -> Result<SceneData, WorkerError> {
             serde_json::from_slice(json).map_err(|e| WorkerError::Scene(e.to_string()))
@@ -341,13 +342,13 @@ impl SessionWorker {
         let mut shown = shown.clone();
         shown.summary = summary.clone();
         shown.scene_json = scene_json.clone();
-        self.results = Some(shown);
+        self.opened.shown_mut().ok_or(WorkerError::NoSession)?.results = Some(shown);
         Ok(Some((summary, scene_json)))
     }
 
     /// Shows participant `id` of the open capture (or share of one).
     pub fn select_participant(&mut self, id: &str) -> Result<SelectedParticipant, WorkerError> {
-        let group = self.group.as_mut().ok_or(WorkerError::NoSession)?;
+        let group = self.opened.group_mut().ok_or(WorkerError::NoSession)?;
         let index = group.index_of(id)?;
         if !group.participants[index].reconstruct {
             return Err(WorkerError::NotReconstructed(id.to_string()));
@@ -369,7 +370,7 @@ impl SessionWorker {
     /// Keypoints the detector step found for the shown participant in `observer`'s video go
     /// into the capture too.
     pub(super) fn keep_detected_keypoints(&mut self, observer: &str, keypoints: KeypointTrack) {
-        if let Some(group) = &mut self.group {
+        if let Some(group) = self.opened.group_mut() {
             group.assign_keypoints(observer, keypoints);
         }
     }
@@ -377,7 +378,7 @@ impl SessionWorker {
     /// The open capture (when one is open) as a `.egoexo` of version 3, with its videos when
     /// `with_videos`: its name and the bytes.
     pub(super) fn capture_zip(&self, with_videos: bool) -> Option<(String, Result<Vec<u8>, WriteError>)> {
-        let group = self.group.as_ref()?;
+        let group = self.opened.group()?;
         let capture = group.capture.as_ref()?;
         let videos = if with_videos {
             group.videos.iter().map(|(path, bytes)| (path.clone(), bytes.to_vec())).collect()
@@ -389,7 +390,7 @@ impl SessionWorker {
 
     /// Every reconstructed participant's part of what is shown, for a share.
     pub(super) fn shared_participants(&self) -> Vec<egoexo_share::SharedParticipant> {
-        let Some(group) = &self.group else { return Vec::new() };
+        let Some(group) = self.opened.group() else { return Vec::new() };
         group
             .results
             .iter()
@@ -416,8 +417,8 @@ impl SessionWorker {
         if shared.is_empty() {
             return Ok(());
         }
-        if self.group.is_none() {
-            self.group = Some(Group {
+        if self.opened.group().is_none() {
+            let group = Group {
                 capture: None,
                 source: SourceKind::Egoexo,
                 warnings: Vec::new(),
@@ -426,9 +427,18 @@ impl SessionWorker {
                 selected: 0,
                 association: None,
                 results: BTreeMap::new(),
-            });
+            };
+            // The share opened as one wearer (its shown results, maybe its recording): the
+            // same shown, now a capture's.
+            let shown = match std::mem::take(&mut self.opened) {
+                Opened::Wearer(shown) => shown,
+                Opened::Nothing | Opened::Capture(..) => Shown::default(),
+            };
+            self.opened = Opened::Capture(group, shown);
         }
-        let group = self.group.as_mut().ok_or(WorkerError::NoSession)?;
+        // The association came with the shown participant's summary.
+        let association = self.opened.results().map(|r| r.summary.association.clone());
+        let group = self.opened.group_mut().ok_or(WorkerError::NoSession)?;
         for p in shared {
             let index = group.index_of(&p.entry.participant.id)?;
             let results = Results {
@@ -445,8 +455,7 @@ impl SessionWorker {
         if let Some(id) = shown {
             group.selected = group.index_of(id)?;
         }
-        // The association came with the shown participant's summary.
-        group.association = self.results.as_ref().map(|r| r.summary.association.clone());
+        group.association = association;
         if group.capture.is_some() {
             let selected = group.selected;
             self.open_participant(selected, StageTimings::default())?;

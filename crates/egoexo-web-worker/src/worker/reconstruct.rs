@@ -148,12 +148,14 @@ impl SessionWorker {
     pub fn start_reconstruction(&mut self, ego_only_overlay: bool) -> Result<ReconstructionTask, WorkerError> {
         let engine = self.models.as_ref().ok_or(WorkerError::NoModels)?.offline();
         let fps = self.fps();
-        let open = self.session.as_mut().ok_or(WorkerError::NoSession)?;
+        let Some(Shown { session: Some(open), results }) = self.opened.shown_mut() else {
+            return Err(WorkerError::NoSession);
+        };
         if open.aligned.timeline.fps != fps {
             open.aligned = align_for(&open.imported, fps)?;
             open.timings = StageTimings::default();
         }
-        self.results = None;
+        *results = None;
         let job = start_job(engine, &open.aligned, ego_only_overlay)?;
         Ok(ReconstructionTask {
             job,
@@ -180,7 +182,7 @@ impl SessionWorker {
 
     /// The open session as the pool's helpers receive it ([`crate::pool::encode_pool_session`]).
     pub fn pool_session(&self) -> Result<Vec<u8>, WorkerError> {
-        let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
+        let open = self.opened.session().ok_or(WorkerError::NoSession)?;
         Ok(crate::pool::encode_pool_session(&open.aligned)?)
     }
 
@@ -192,7 +194,7 @@ impl SessionWorker {
         window: usize,
     ) -> Result<Vec<egoexo_infer::passes::WindowOutput>, WorkerError> {
         let engine = self.models.as_ref().ok_or(WorkerError::NoModels)?.offline();
-        let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
+        let open = self.opened.session().ok_or(WorkerError::NoSession)?;
         Ok(if self.clock.is_set() {
             let mut now = self.clock.now_fn();
             task.job.run_window_timed(engine, &open.aligned, window, &mut now)?
@@ -240,7 +242,7 @@ impl SessionWorker {
     /// Runs the next window of `task`; `None` when every pass is done.
     pub fn step_reconstruction(&self, task: &mut ReconstructionTask) -> Result<Option<JobProgress>, WorkerError> {
         let engine = self.models.as_ref().ok_or(WorkerError::NoModels)?.offline();
-        let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
+        let open = self.opened.session().ok_or(WorkerError::NoSession)?;
         let progress = if self.clock.is_set() {
             let mut now = self.clock.now_fn();
             task.job.step_timed(engine, &open.aligned, &mut now)?
@@ -256,7 +258,7 @@ impl SessionWorker {
     /// the exports.
     pub fn finish_reconstruction(&mut self, task: ReconstructionTask) -> Result<ReconstructionSummary, WorkerError> {
         let engine = self.models.as_ref().ok_or(WorkerError::NoModels)?.offline();
-        let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
+        let open = self.opened.session().ok_or(WorkerError::NoSession)?;
         let windows = task.job.plan().windows.len();
         let runs = (engine.network_runs() - task.runs_before) + task.helper_runs;
         let (reconstructions, mut timings) = if self.clock.is_set() {
@@ -271,7 +273,7 @@ impl SessionWorker {
         let mut summary = reconstruction_summary(&open.aligned, &ego_exo, ego_only.as_ref(), windows, runs);
         summary.pool = task.pool;
         summary.detection = open.detection.clone();
-        let participant = self.group.as_ref().map(|g| g.scene_participant(g.selected));
+        let participant = self.opened.group().map(|g| g.scene_participant(g.selected));
         let scene_json = self.timed(&mut timings, TimedStage::Scene, || {
             let mut scene = crate::scene::build_scene(&open.aligned, &ego_exo, ego_only.as_ref());
             scene.participant = participant.clone();
@@ -285,7 +287,7 @@ impl SessionWorker {
             .iter()
             .map(|s| protocol::StageTiming { stage: s.stage.name().to_string(), ms: s.ms, calls: s.calls })
             .collect();
-        self.results = Some(Results {
+        let shown = Results {
             name: open.aligned.name.clone(),
             method: ego_exo.method.name().to_string(),
             motion: ego_exo.motion.clone(),
@@ -293,7 +295,8 @@ impl SessionWorker {
             summary: summary.clone(),
             session: open.summary.clone(),
             made_here: Some((ego_exo, ego_only)),
-        });
+        };
+        self.opened.shown_mut().ok_or(WorkerError::NoSession)?.results = Some(shown);
         self.store_participant_results();
         Ok(summary)
     }

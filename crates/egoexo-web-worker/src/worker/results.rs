@@ -68,7 +68,7 @@ impl SessionWorker {
 
     /// The open session as a `.egoexo` file.
     pub fn save_session(&self) -> Result<ExportedFile, WorkerError> {
-        let open = self.session.as_ref().ok_or(WorkerError::NoSession)?;
+        let open = self.opened.session().ok_or(WorkerError::NoSession)?;
         // A capture of several participants is saved whole (version 3), with every keypoint
         // the detector step found.
         if let Some((name, bytes)) = self.capture_zip(true) {
@@ -88,27 +88,27 @@ impl SessionWorker {
 
     /// The last reconstruction made here (the full method), if any.
     pub fn reconstruction(&self) -> Option<&Reconstruction> {
-        self.results.as_ref().and_then(|r| r.made_here.as_ref()).map(|(ego_exo, _)| ego_exo)
+        self.opened.results().and_then(|r| r.made_here.as_ref()).map(|(ego_exo, _)| ego_exo)
     }
 
     /// The ego-only reconstruction of the overlay, if any.
     pub fn ego_only_reconstruction(&self) -> Option<&Reconstruction> {
-        self.results.as_ref().and_then(|r| r.made_here.as_ref()).and_then(|(_, ego_only)| ego_only.as_ref())
+        self.opened.results().and_then(|r| r.made_here.as_ref()).and_then(|(_, ego_only)| ego_only.as_ref())
     }
 
     /// The summary of the last reconstruction.
     pub fn reconstruction_summary(&self) -> Option<&ReconstructionSummary> {
-        self.results.as_ref().map(|r| &r.summary)
+        self.opened.results().map(|r| &r.summary)
     }
 
     /// The viewer's scene of what is shown ([`egoexo_scene::SceneData`]) as JSON.
     pub fn scene_json(&self) -> Result<Vec<u8>, WorkerError> {
-        Ok(self.results.as_ref().ok_or(WorkerError::NoReconstruction)?.scene_json.clone())
+        Ok(self.opened.results().ok_or(WorkerError::NoReconstruction)?.scene_json.clone())
     }
 
     /// Writes the shown motion (the full method) in `format`.
     pub fn export(&self, format: ExportFormat) -> Result<ExportedFile, WorkerError> {
-        let results = self.results.as_ref().ok_or(WorkerError::NoReconstruction)?;
+        let results = self.opened.results().ok_or(WorkerError::NoReconstruction)?;
         let format = motion_format(format);
         let bytes = egoexo_motion_io::write(format, &results.motion)?;
         Ok(ExportedFile {
@@ -122,9 +122,9 @@ impl SessionWorker {
     /// with the recording as a `.egoexo` session when `include_recording` and the session is
     /// open here. `created_by` names the app (`egoexo 0.1.0 (page)`).
     pub fn pack_share(&self, include_recording: bool, created_by: &str) -> Result<Vec<u8>, WorkerError> {
-        let results = self.results.as_ref().ok_or(WorkerError::NoReconstruction)?;
+        let results = self.opened.results().ok_or(WorkerError::NoReconstruction)?;
         // The recording: a capture of several participants whole, else the open session.
-        let session_egoexo = match (&self.session, include_recording) {
+        let session_egoexo = match (self.opened.session(), include_recording) {
             (Some(open), true) => Some(
                 match self.capture_zip(false) {
                     Some((_, bytes)) => bytes,
@@ -146,7 +146,7 @@ impl SessionWorker {
 
     /// Whether a share made now could include the recording (a session is open here).
     pub fn can_share_recording(&self) -> bool {
-        self.session.is_some()
+        self.opened.session().is_some()
     }
 
     /// Opens a share container (already opened from its envelope): shows its scene and motion
@@ -154,15 +154,13 @@ impl SessionWorker {
     /// reconstructed again.
     pub fn open_share(&mut self, container: Vec<u8>) -> Result<OpenedShare, WorkerError> {
         let contents = egoexo_share::unpack(container)?;
-        self.results = None;
-        self.session = None;
-        self.group = None;
+        self.opened = Opened::Nothing;
         if let Some(recording) = contents.session_egoexo {
             let name = format!("{}.egoexo", contents.manifest.name);
             self.import(&FileTree::from_zip(name, recording, Limits::default())?)?;
         }
         let manifest = contents.manifest;
-        self.results = Some(Results {
+        let shown = Results {
             name: manifest.name.clone(),
             method: manifest.summary.method.clone(),
             motion: contents.motion,
@@ -170,7 +168,12 @@ impl SessionWorker {
             summary: manifest.summary.clone(),
             session: manifest.session.clone(),
             made_here: None,
-        });
+        };
+        // A share without its recording opens as a wearer with results and no session.
+        match self.opened.shown_mut() {
+            Some(opened) => opened.results = Some(shown),
+            None => self.opened = Opened::Wearer(Shown { session: None, results: Some(shown) }),
+        }
         self.open_shared_participants(contents.participants, manifest.summary.participant.as_deref())?;
         Ok(OpenedShare { manifest, scene_json: contents.scene_json })
     }

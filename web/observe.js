@@ -9,23 +9,13 @@
 
 import init, { XrJoin, observeCalibration, observeFrameTimeNs } from './pkg/egoexo_web_worker.js';
 import { DeviceSocket } from './device-socket.js';
-import {
-  clearError, connectionHooks, linkJoinFromAddress, message, rememberDeviceId, rememberedDeviceId, setState, showError,
-} from './device-page.js';
-
-const DEVICE_ID_KEY = 'egoexo.observe.device-id';
+import { JoinForm, connectionHooks, message, setState, showError } from './device-page.js';
 
 const $ = (id) => document.getElementById(id);
 const ui = {
-  form: $('join-form'),
-  code: $('code-input'),
-  device: $('device-input'),
   target: $('target-input'),
   camera: $('camera-select'),
   fov: $('fov-input'),
-  enter: $('enter-button'),
-  stop: $('stop-button'),
-  supportNote: $('support-note'),
   previewPanel: $('preview-panel'),
   video: $('preview-video'),
   overlay: $('preview-overlay'),
@@ -40,7 +30,7 @@ const ui = {
 
 const nowNs = () => (performance.timeOrigin + performance.now()) * 1e6;
 
-const page = { linkJoin: null, run: null };
+const page = { form: null, run: null }; // form: the JoinForm (made once the wasm module is in)
 
 
 
@@ -184,8 +174,7 @@ class Observation {
     for (const track of this.stream.getTracks()) track.stop();
     ui.connection.textContent = 'not connected';
     if (page.run === this) page.run = null;
-    ui.enter.disabled = false;
-    ui.stop.hidden = true;
+    page.form.running(false);
     if (document.body.dataset.state !== 'error') setState('ready');
   }
 
@@ -261,25 +250,17 @@ async function listCameras() {
 }
 
 async function startObserving() {
-  clearError();
-  let join;
-  try {
-    join = page.linkJoin ?? XrJoin.parse(ui.code.value);
-    join.observerHello(ui.device.value, ui.target.value, true); // checks the ids first
-  } catch (error) {
-    showError(message(error));
-    return;
-  }
-  const deviceId = ui.device.value.trim();
-  rememberDeviceId(DEVICE_ID_KEY, deviceId);
-  ui.enter.disabled = true;
+  // The ids are checked before the camera is asked for.
+  const taken = page.form.take((join, deviceId) => join.observerHello(deviceId, ui.target.value, true));
+  if (!taken) return;
+  const { join, deviceId } = taken;
   let stream;
   try {
     const video = { width: { ideal: 640 }, height: { ideal: 480 } };
     if (ui.camera.value) video.deviceId = { exact: ui.camera.value };
     stream = await navigator.mediaDevices.getUserMedia({ video, audio: false });
   } catch (error) {
-    ui.enter.disabled = false;
+    page.form.running(false);
     const why = error?.name === 'NotAllowedError' ? 'permission to use the camera was refused' : message(error);
     showError(`No camera: ${why}.`);
     return;
@@ -287,7 +268,7 @@ async function startObserving() {
   listCameras();
   const run = new Observation(join, deviceId, ui.target.value.trim(), stream);
   page.run = run;
-  ui.stop.hidden = false;
+  page.form.running(true);
   try {
     await run.start();
   } catch (error) {
@@ -297,35 +278,31 @@ async function startObserving() {
 
 async function main() {
   await init();
-  page.linkJoin = linkJoinFromAddress(XrJoin);
+  page.form = new JoinForm(XrJoin, {
+    idKey: 'egoexo.observe.device-id',
+    defaultId: 'camera',
+    codeHelp: 'The code shown where the room was made, or open the observer link on this device.',
+    enterLabel: 'Start observing',
+    start: startObserving,
+    stop: () => page.run?.stop(),
+    running: () => page.run !== null,
+  });
   const params = new URLSearchParams(location.search);
   if (params.get('target')) ui.target.value = params.get('target');
   if (params.get('fov')) ui.fov.value = params.get('fov');
-  const saved = rememberedDeviceId(DEVICE_ID_KEY);
-  if (saved) ui.device.value = saved;
-  if (params.get('device')) ui.device.value = params.get('device');
-  ui.form.addEventListener('submit', (event) => {
-    event.preventDefault();
-    if (!page.run) startObserving();
-  });
-  ui.stop.addEventListener('click', () => page.run?.stop());
+  if (params.get('device')) page.form.ui.device.value = params.get('device');
   if (!navigator.mediaDevices?.getUserMedia) {
-    ui.supportNote.textContent = window.isSecureContext
+    page.form.unsupported(window.isSecureContext
       ? 'This browser gives pages no camera.'
-      : 'A camera needs a secure page: open this page over https:// (or on localhost, e.g. through `adb reverse`).';
-    ui.supportNote.hidden = false;
-    setState('unsupported');
+      : 'A camera needs a secure page: open this page over https:// (or on localhost, e.g. through `adb reverse`).');
     return;
   }
   if (!('requestVideoFrameCallback' in HTMLVideoElement.prototype)) {
-    ui.supportNote.textContent = 'This browser cannot hand a page its camera frames one by one (requestVideoFrameCallback).';
-    ui.supportNote.hidden = false;
-    setState('unsupported');
+    page.form.unsupported('This browser cannot hand a page its camera frames one by one (requestVideoFrameCallback).');
     return;
   }
   await listCameras();
-  ui.enter.disabled = false;
-  if (document.body.dataset.state !== 'error') setState('ready');
+  page.form.ready();
 }
 
 main().catch((error) => showError(`The page could not start: ${message(error)}`));

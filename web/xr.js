@@ -8,20 +8,10 @@
 
 import init, { XrJoin, XrSource, xr_pose_frame } from './pkg/egoexo_web_worker.js';
 import { DeviceSocket } from './device-socket.js';
-import {
-  clearError, connectionHooks, linkJoinFromAddress, message, rememberDeviceId, rememberedDeviceId, setState, showError,
-} from './device-page.js';
-
-const DEVICE_ID_KEY = 'egoexo.xr.device-id';
+import { JoinForm, connectionHooks, message, setState, showError } from './device-page.js';
 
 const $ = (id) => document.getElementById(id);
 const ui = {
-  form: $('join-form'),
-  code: $('code-input'),
-  device: $('device-input'),
-  enter: $('enter-button'),
-  stop: $('stop-button'),
-  supportNote: $('support-note'),
   connection: $('connection'),
   tracking: $('tracking'),
   framesSent: $('frames-sent'),
@@ -39,7 +29,7 @@ const SIDES = [
 ];
 
 const page = {
-  linkJoin: null, // XrJoin from #live=…, if the address has one
+  form: null, // the JoinForm (made once the wasm module is in)
   xrMode: null, // 'immersive-vr', 'immersive-ar' or 'inline'
   run: null, // the running stream, below
 };
@@ -90,8 +80,7 @@ class Stream {
       // ended already
     }
     if (page.run === this) page.run = null;
-    ui.enter.disabled = false;
-    ui.stop.hidden = true;
+    page.form.running(false);
     if (document.body.dataset.state !== 'error') setState('ready');
   }
 
@@ -197,18 +186,10 @@ class Stream {
 }
 
 async function enterXr() {
-  clearError();
-  let join;
-  try {
-    join = page.linkJoin ?? XrJoin.parse(ui.code.value);
-    join.hello(ui.device.value); // checks the device id before entering XR
-  } catch (error) {
-    showError(message(error));
-    return;
-  }
-  const deviceId = ui.device.value.trim();
-  rememberDeviceId(DEVICE_ID_KEY, deviceId);
-  ui.enter.disabled = true;
+  // The device id is checked before entering XR.
+  const taken = page.form.take((join, deviceId) => join.hello(deviceId));
+  if (!taken) return;
+  const { join, deviceId } = taken;
   let session;
   try {
     // Asked for first, while the click still counts as the person's gesture.
@@ -217,13 +198,13 @@ async function enterXr() {
       : { optionalFeatures: ['local-floor', 'local', 'hand-tracking'] };
     session = await navigator.xr.requestSession(page.xrMode, features);
   } catch (error) {
-    ui.enter.disabled = false;
+    page.form.running(false);
     showError(`The headset did not start XR: ${message(error)}`);
     return;
   }
   const run = new Stream(join, deviceId, session);
   page.run = run;
-  ui.stop.hidden = false;
+  page.form.running(true);
   run.relay.connect();
   try {
     await run.startXr();
@@ -253,27 +234,24 @@ async function detectXr() {
 
 async function main() {
   await init();
-  page.linkJoin = linkJoinFromAddress(XrJoin);
-  const saved = rememberedDeviceId(DEVICE_ID_KEY);
-  if (saved) ui.device.value = saved;
-  ui.form.addEventListener('submit', (event) => {
-    event.preventDefault();
-    if (!page.run) enterXr();
+  page.form = new JoinForm(XrJoin, {
+    idKey: 'egoexo.xr.device-id',
+    defaultId: 'quest',
+    codeHelp: 'The code shown where the room was made, or open the device link on this headset.',
+    enterLabel: 'Enter XR',
+    start: enterXr,
+    stop: () => page.run?.stop(),
+    running: () => page.run !== null,
   });
-  ui.stop.addEventListener('click', () => page.run?.stop());
   const unsupported = await detectXr();
   if (unsupported) {
-    ui.supportNote.textContent = unsupported;
-    ui.supportNote.hidden = false;
-    if (document.body.dataset.state !== 'error') setState('unsupported');
+    page.form.unsupported(unsupported);
     return;
   }
   if (page.xrMode === 'inline') {
-    ui.supportNote.textContent = 'No immersive XR here: streaming from an inline session, if this device tracks one.';
-    ui.supportNote.hidden = false;
+    page.form.note('No immersive XR here: streaming from an inline session, if this device tracks one.');
   }
-  ui.enter.disabled = false;
-  if (document.body.dataset.state !== 'error') setState('ready');
+  page.form.ready();
 }
 
 main().catch((error) => showError(`The page could not start: ${message(error)}`));

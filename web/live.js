@@ -3,7 +3,7 @@
 // take and the reconstruction are the worker's (Rust); this file moves events to the screen
 // and measures glass-to-skeleton latency (relay timestamp of the drawn frame → drawn).
 
-import { live_fragment } from './pkg/egoexo_viewer.js';
+import { link_qr_svg, live_fragment } from './pkg/egoexo_viewer.js';
 
 const $ = (id) => document.getElementById(id);
 const LATENCY_WINDOW = 300; // frames the latency percentiles are taken over
@@ -46,8 +46,10 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
     return sorted[Math.min(sorted.length - 1, Math.round((sorted.length - 1) * q))];
   }
 
+  // Rows of the room's facts: [name, value, copyable (a read-only field to copy from), qr (the
+  // caption of a QR code of the value beside it, for a phone to scan)].
   function facts(rows) {
-    $('live-facts').replaceChildren(...rows.flatMap(([k, v, copyable]) => {
+    $('live-facts').replaceChildren(...rows.flatMap(([k, v, copyable, qr]) => {
       const dt = document.createElement('dt');
       const dd = document.createElement('dd');
       dt.textContent = k;
@@ -58,6 +60,15 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
         input.value = v;
         input.setAttribute('aria-label', k);
         dd.append(input);
+        if (qr) {
+          const figure = document.createElement('figure');
+          figure.className = 'qr';
+          figure.innerHTML = link_qr_svg(v); // an SVG the Rust code drew: no outside markup
+          const caption = document.createElement('figcaption');
+          caption.textContent = qr;
+          figure.append(caption);
+          dd.append(figure);
+        }
       } else {
         dd.textContent = v;
       }
@@ -99,7 +110,8 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
     facts([
       ['device code', room.device_code],
       ['headset page', `${base}xr.html#${live_fragment(room.room, room.device_secret)}`, true],
-      ['camera page', `${base}observe.html#${live_fragment(room.room, room.device_secret)}`, true],
+      ['camera page', `${base}observe.html#${live_fragment(room.room, room.device_secret)}`, true,
+        'Scan with the phone that will watch the wearer'],
       ['watch link', `${base}#${live_fragment(room.room, room.viewer_secret)}`, true],
       ['replay a session', `egoexo live replay session.egoexo --url ${state.share.apiBase} --room ${room.device_code}`, true],
       ['expires', room.expires_at],

@@ -1,6 +1,7 @@
 // The observer page end to end: a camera in the room is a browser page. `egoexo walk` films a
 // wearer wandering in front of a tripod (`--static-cameras --video 480 --y4m`); a Chromium
-// whose fake camera plays that film opens the Live panel's camera link (`/observe.html`),
+// whose fake camera plays that film opens the Live panel's camera link (`/observe.html`, read
+// from the panel's QR code as a phone would),
 // joins the room as a static camera and streams the keypoints its detector finds, while
 // `egoexo live replay --no-observers` streams the wearer's glasses. The watching page receives
 // the camera's keypoints, lists it, registers it in 6 DoF and fuses its rays.
@@ -11,6 +12,9 @@ import { mkdtempSync, readdirSync, readFileSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { after, before, describe, test } from 'node:test';
+
+import jsQR from 'jsqr';
+import { PNG } from 'pngjs';
 
 import { APP_URL, EGOEXO, egoexo, launch, openApp } from './browser.mjs';
 
@@ -67,6 +71,11 @@ describe('observer page', () => {
     const code = await app.page.getAttribute('#live-room', 'data-code');
     const link = new URL(await app.page.getByLabel('camera page').inputValue());
     assert.equal(link.pathname, '/observe.html');
+    // A phone scans the QR code beside the link: it holds the same link.
+    const qr = PNG.sync.read(await app.page.locator('#live-facts figure.qr svg').screenshot());
+    const scanned = jsQR(new Uint8ClampedArray(qr.data), qr.width, qr.height);
+    assert.ok(scanned, `a readable QR code (${qr.width} × ${qr.height} px)`);
+    assert.equal(scanned.data, link.href);
     await app.waitState('live');
 
     // The camera page from the link, told the film's field of view.

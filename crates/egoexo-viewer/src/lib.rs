@@ -53,6 +53,7 @@
 //! viewer.free();
 //! const rgba = await Viewer.render_offscreen(sceneJsonBytes, frame, width, height, 'auto');
 //! const mp4 = mux_h264_mp4(avcc, width, height, fps, data, sizes, keys);  // WebCodecs frames → MP4
+//! link_qr_svg(link);                 // a link as an SVG QR code (black on white, quiet zone included)
 //!
 //! const client = new WorkerClient(new Worker('worker.js', { type: 'module' }));
 //! client.warm_up();                            // load the models now
@@ -91,7 +92,7 @@
 //!
 //! # Native builds
 //! Only the pure parts build natively ([`camera`], [`playback`], [`scene`], [`plots`], [`mesh`],
-//! [`colors`], [`example`]); wgpu, web-sys and the `Viewer` class exist on `wasm32` only.
+//! [`colors`], [`example`], [`qr`]); wgpu, web-sys and the `Viewer` class exist on `wasm32` only.
 
 pub mod camera;
 pub mod colors;
@@ -100,6 +101,7 @@ pub mod example;
 pub mod mesh;
 pub mod playback;
 pub mod plots;
+pub mod qr;
 pub mod scene;
 
 #[cfg(target_arch = "wasm32")]
@@ -107,7 +109,8 @@ mod web;
 
 #[cfg(target_arch = "wasm32")]
 pub use web::{
-    Viewer, WorkerClient, fragment_with_time, mux_h264_mp4, parse_fragment, participant_colour, share_fragment,
+    Viewer, WorkerClient, fragment_with_time, link_qr_svg, mux_h264_mp4, parse_fragment, participant_colour,
+    share_fragment,
 };
 
 pub use error::{ActiveBackend, BackendPreference, ViewerError};

@@ -76,3 +76,10 @@ pub fn share_fragment(id: &str, key: &str) -> Result<String, JsError> {
     let key = ShareKey::decode(key).map_err(|e| JsError::new(&e))?;
     Ok(LinkFragment { share: Some((id, key)), ..LinkFragment::default() }.to_string())
 }
+
+/// `link` as an SVG QR code (`crate::qr::qr_svg`): the Live panel shows the camera page's link
+/// this way, for a phone to scan. Throws when the link is too long for any QR version.
+#[wasm_bindgen]
+pub fn link_qr_svg(link: &str) -> Result<String, JsError> {
+    crate::qr::qr_svg(link).map_err(|e| JsError::new(&e.to_string()))
+}

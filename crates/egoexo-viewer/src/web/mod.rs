@@ -15,7 +15,7 @@ mod video_export;
 mod viewer;
 mod worker_client;
 
-pub use links::{fragment_with_time, parse_fragment, share_fragment};
+pub use links::{fragment_with_time, link_qr_svg, parse_fragment, share_fragment};
 pub use video_export::mux_h264_mp4;
 pub use viewer::{Viewer, participant_colour};
 pub use worker_client::WorkerClient;

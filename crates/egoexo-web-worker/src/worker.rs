@@ -159,7 +159,7 @@ enum Opened {
     Wearer(Shown),
     /// A capture of several participants, or a share of one: everyone's results wait in the
     /// group; `Shown` is the shown participant's session and results.
-    Capture(group::Group, Shown),
+    Capture(Box<group::Group>, Shown),
 }
 
 /// The shown wearer's session and results. A share opened without its recording has

@@ -191,7 +191,7 @@ impl SessionWorker {
         }
         let group = Group::new(imported, videos);
         let first = group.selected;
-        self.opened = Opened::Capture(group, Shown::default());
+        self.opened = Opened::Capture(Box::new(group), Shown::default());
         self.open_participant(first, timings)
     }
 
@@ -434,7 +434,7 @@ impl SessionWorker {
                 Opened::Wearer(shown) => shown,
                 Opened::Nothing | Opened::Capture(..) => Shown::default(),
             };
-            self.opened = Opened::Capture(group, shown);
+            self.opened = Opened::Capture(Box::new(group), shown);
         }
         // The association came with the shown participant's summary.
         let association = self.opened.results().map(|r| r.summary.association.clone());

@@ -53,10 +53,11 @@ export function connectionHooks(label, { state, doing, onWelcome, onFail }) {
 // fields). This builds what every device page asks for around them: after the heading, the
 // room (from the address's `#live=…` link, or a device code) and this device's id, remembered
 // in local storage under `idKey`; at the end, the Enter button (`enterLabel`), Stop and a note
-// (#enter-button, #stop-button, #support-note). `XrJoin` is the wasm module's; `start` runs on
-// submit while nothing runs (`running()` false), `stop` on Stop.
+// (#enter-button, #stop-button, #support-note). `XrJoin` is the wasm module's; `page` is the
+// page's state, whose `run` is what is streaming (with a `stop()`) or null: `start` runs on
+// submit while nothing runs, Stop stops the run.
 export class JoinForm {
-  constructor(XrJoin, { idKey, defaultId, codeHelp, enterLabel, start, stop, running }) {
+  constructor(XrJoin, { idKey, defaultId, codeHelp, enterLabel, start, page }) {
     this.XrJoin = XrJoin;
     this.idKey = idKey;
     const form = $('join-form');
@@ -94,9 +95,9 @@ export class JoinForm {
     this.linkJoin = this.#linkJoinFromAddress();
     form.addEventListener('submit', (event) => {
       event.preventDefault();
-      if (!running()) start();
+      if (!page.run) start();
     });
-    this.ui.stop.addEventListener('click', () => stop());
+    this.ui.stop.addEventListener('click', () => page.run?.stop());
   }
 
   // The room in the address's `#live=…`, if any: shown in the form (#link-note) instead of the

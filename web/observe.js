@@ -284,8 +284,7 @@ async function main() {
     codeHelp: 'The code shown where the room was made, or open the observer link on this device.',
     enterLabel: 'Start observing',
     start: startObserving,
-    stop: () => page.run?.stop(),
-    running: () => page.run !== null,
+    page,
   });
   const params = new URLSearchParams(location.search);
   if (params.get('target')) ui.target.value = params.get('target');

@@ -240,8 +240,7 @@ async function main() {
     codeHelp: 'The code shown where the room was made, or open the device link on this headset.',
     enterLabel: 'Enter XR',
     start: enterXr,
-    stop: () => page.run?.stop(),
-    running: () => page.run !== null,
+    page,
   });
   const unsupported = await detectXr();
   if (unsupported) {

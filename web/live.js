@@ -63,9 +63,13 @@ export function createLive(state, { fail, showSession, startReconstruction }) {
         if (qr) {
           const figure = document.createElement('figure');
           figure.className = 'qr';
-          figure.innerHTML = link_qr_svg(v); // an SVG the Rust code drew: no outside markup
           const caption = document.createElement('figcaption');
-          caption.textContent = qr;
+          try {
+            figure.innerHTML = link_qr_svg(v); // an SVG the Rust code drew: no outside markup
+            caption.textContent = qr;
+          } catch (error) {
+            caption.textContent = `No QR code: ${error.message}`; // the link above still works
+          }
           figure.append(caption);
           dd.append(figure);
         }

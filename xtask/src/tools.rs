@@ -95,7 +95,10 @@ pub fn ensure_chromium() -> Result<(PathBuf, PathBuf)> {
     if let (Some(chromium), Some(driver)) = find() {
         return Ok((chromium, driver));
     }
-    let install = "apt-get update && apt-get install -y chromium chromium-driver";
+    // Without Debian's recommended packages (udev, upower, a printer dialog and what they pull
+    // in: 131 packages on a fresh machine): a headless Chromium needs none of them, only a font.
+    let install =
+        "apt-get update && apt-get install -y --no-install-recommends chromium chromium-driver fonts-liberation";
     if !is_root() {
         bail!(
             "Chromium and chromedriver are needed for the browser tests; install them with:\n    sudo sh -c '{install}'"

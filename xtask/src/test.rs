@@ -388,7 +388,28 @@ fn write_webdriver_json(root: &Path, chromium: &Path) -> Result<std::path::PathB
 
 #[cfg(test)]
 mod tests {
-    use super::parse_df_available_gib;
+    use super::*;
+
+    /// The `{ opt-level = 0 }` entries of the `[profile.<profile>.package]` table.
+    fn unoptimised_crates(cargo_toml: &str, profile: &str) -> Vec<String> {
+        let header = format!("[profile.{profile}.package]");
+        let table = cargo_toml.split(&header).nth(1).expect("the profile's package table");
+        let table = table.split("\n[").next().unwrap();
+        table.lines().filter_map(|l| l.strip_suffix(" = { opt-level = 0 }")).map(str::to_string).collect()
+    }
+
+    #[test]
+    fn the_compile_time_crates_are_unoptimised_in_both_profiles() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+        let cargo_toml = std::fs::read_to_string(root.join("Cargo.toml")).unwrap();
+        let lock = std::fs::read_to_string(root.join("Cargo.lock")).unwrap();
+        let dev = unoptimised_crates(&cargo_toml, "dev");
+        assert!(dev.len() >= 10 && dev.contains(&"syn".to_string()), "{dev:?}");
+        assert_eq!(dev, unoptimised_crates(&cargo_toml, web::WASM_PROFILE), "the dev and wasm lists differ");
+        for name in &dev {
+            assert!(lock.contains(&format!("name = \"{name}\"\n")), "{name} is not in Cargo.lock");
+        }
+    }
 
     #[test]
     fn reads_the_available_column_of_posix_df() {

@@ -33,6 +33,17 @@ pub fn output_checked(cmd: &mut Command) -> Result<String> {
     Ok(stdout)
 }
 
+/// Runs `cmd` (a cargo command with `--message-format=json…`) with stderr inherited and
+/// returns its stdout's JSON messages; fails on a non-zero exit.
+pub fn json_lines(cmd: &mut Command) -> Result<Vec<serde_json::Value>> {
+    eprintln!("$ {}", describe(cmd));
+    let out = cmd.stderr(Stdio::inherit()).output().with_context(|| format!("could not start `{}`", describe(cmd)))?;
+    if !out.status.success() {
+        bail!("`{}` failed with {}", describe(cmd), out.status);
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).lines().filter_map(|line| serde_json::from_str(line).ok()).collect())
+}
+
 /// Totals of the `test result:` lines a test run printed.
 #[derive(Debug, Default, Clone, Copy)]
 pub struct TestCounts {

@@ -9,27 +9,40 @@ use anyhow::{Context, Result};
 use crate::cmd::{self, TestCounts};
 use crate::{e2e, serve, tools, web};
 
-/// Every wasm test build uses the web app's profile ([`web::WASM_PROFILE`]): one compiled copy
-/// of the shared dependencies (serde, glam, zip, tract, wgpu, …) serves the tests and `dist/`,
-/// instead of a debug copy for some tests and an optimised one for the rest. The app's own
-/// crates build first, so the smaller crates' tests after them only add what differs.
-///
-/// Crates whose tests run compiled to wasm32 in headless Chromium with the features of the
-/// app's own build of that crate, so that the tests and the app share one compiled wgpu.
-const WASM_APP_PROFILE_TEST_CRATES: &[&str] = &["egoexo-viewer"];
+/// The tests that run compiled to wasm32 in headless Chromium, with the web app's profile
+/// ([`web::WASM_PROFILE`]). They build in **one** `cargo test --no-run`, so every dependency
+/// compiles once, with one feature set: four selections built in turn resolved four feature
+/// sets and compiled ~240 s of CPU again (syn, web-sys, egoexo-protocol, …; docs/performance.md).
+/// That build makes the app's two modules too, which `dist/` is then assembled from
+/// ([`web::WasmBuild::BuiltByWasmTests`]).
+const WASM_TESTS: &[WasmTests] = &[
+    WasmTests::Crate("egoexo-viewer"),
+    WasmTests::Crate("egoexo-core"),
+    WasmTests::Crate("egoexo-video"),
+    WasmTests::Target("egoexo-web-worker", "worker_wasm"),
+    WasmTests::Target("egoexo-infer", "parity_wasm"),
+    WasmTests::Target("egoexo-motion-io", "export_wasm"),
+    WasmTests::Target("egoexo-session", "import_wasm"),
+];
 
-/// Test targets (crate, test) of the app's crates. They build in one cargo invocation: the
-/// dependency features are then the union over these crates, which is what the worker
-/// module's own build resolves to, so nothing is compiled twice.
-const WASM_APP_PROFILE_TEST_TARGETS: &[(&str, &str)] =
-    &[("egoexo-web-worker", "worker_wasm"), ("egoexo-infer", "parity_wasm")];
+/// One entry of [`WASM_TESTS`].
+#[derive(Clone, Copy, Debug)]
+enum WasmTests {
+    /// Every test of the crate: its unit tests and each `tests/*.rs`.
+    Crate(&'static str),
+    /// One integration test (crate, test) of a crate whose other tests need native I/O. (The
+    /// one build selects unit tests with `--lib` for every crate, so these crates' unit tests
+    /// are compiled for wasm32 too, but not run.)
+    Target(&'static str, &'static str),
+}
 
-/// Crates whose tests all run compiled to wasm32 too (after the app's).
-const WASM_TEST_CRATES: &[&str] = &["egoexo-core", "egoexo-video"];
-
-/// Single test targets (crate, test) that run compiled to wasm32, for crates whose other tests
-/// need native I/O.
-const WASM_TEST_TARGETS: &[(&str, &str)] = &[("egoexo-motion-io", "export_wasm"), ("egoexo-session", "import_wasm")];
+impl WasmTests {
+    fn package(self) -> &'static str {
+        match self {
+            Self::Crate(package) | Self::Target(package, _) => package,
+        }
+    }
+}
 
 /// Timed reconstructions of the bench page during `cargo xtask test` (a figure, not a check).
 const TEST_BENCH_RUNS: u32 = 3;
@@ -149,15 +162,10 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
             })
         })?;
 
-    // The wasm selections, each one `cargo test` invocation, the app's crates first. Crates
-    // and targets of one selection build together: their shared dependencies compile once, with
-    // one feature set, instead of once per crate (each separate invocation recompiled
-    // wasm-bindgen, egoexo-core or nalgebra for its own features).
-    let app_crates = WASM_APP_PROFILE_TEST_CRATES.iter().map(|krate| vec!["--package", *krate]);
-    let app_targets = std::iter::once(test_targets_selection(WASM_APP_PROFILE_TEST_TARGETS));
-    let crates = std::iter::once(WASM_TEST_CRATES.iter().flat_map(|krate| ["--package", *krate]).collect());
-    let targets = std::iter::once(test_targets_selection(WASM_TEST_TARGETS));
-    let wasm_selections: Vec<Vec<&str>> = app_crates.chain(app_targets).chain(crates).chain(targets).collect();
+    let wasm_selection = match wasm {
+        true => Some(WasmSelection::new(root, WASM_TESTS)?),
+        false => None,
+    };
     let wasm_env = match &browser {
         Some(t) => Some(WasmTestEnv { tools: t.clone(), webdriver_json: write_webdriver_json(root, &t.chromium)? }),
         None => None,
@@ -169,16 +177,15 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
     let (native_counts, built_app) =
         phases.time("native tests, with the wasm test builds and dist/ beside them", || {
             std::thread::scope(|scope| {
-                let wasm_build = wasm_env.as_ref().map(|env| {
-                    let selections = &wasm_selections;
-                    scope.spawn(move || -> Result<Vec<web::ModuleSize>> {
-                        for selection in selections {
-                            cmd::run(env.cargo_test(selection).arg("--no-run"))?;
-                        }
-                        // The tests' build (profile wasm-release, whose dependencies the wasm
-                        // tests just compiled); the shipped LTO build would compile them all again.
+                let wasm_build = wasm_env.as_ref().zip(wasm_selection.as_ref()).map(|(_, selection)| {
+                    scope.spawn(move || -> Result<(Vec<WasmTestBinary>, Vec<web::ModuleSize>)> {
+                        let binaries = selection.build(root)?;
+                        // The modules that build made (profile wasm-release); the shipped LTO
+                        // build would compile everything again.
                         let models = web::models_dir(root, None)?;
-                        web::build_dist(root, &models, web::WasmBuild::Tests, web::WasmOpt::Off)
+                        let sizes =
+                            web::build_dist(root, &models, web::WasmBuild::BuiltByWasmTests, web::WasmOpt::Off)?;
+                        Ok((binaries, sizes))
                     })
                 });
                 let native_counts = match (&native_tools, native) {
@@ -199,15 +206,18 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
         })?;
 
     let wasm_counts = match (&wasm_env, built_app) {
-        (Some(env), Some(sizes)) => {
-            let mut total = TestCounts::default();
-            for selection in &wasm_selections {
-                let name = format!("wasm tests: {}", selection.join(" "));
-                let counts = phases.time(name, || cmd::run_tests(&mut env.cargo_test(selection)))?;
-                total.passed += counts.passed;
-                total.failed += counts.failed;
-                total.ignored += counts.ignored;
-            }
+        (Some(env), Some((binaries, sizes))) => {
+            let name = format!("wasm tests ({} binaries in headless Chromium)", binaries.len());
+            let total = phases.time(name, || {
+                let mut total = TestCounts::default();
+                for binary in &binaries {
+                    let counts = cmd::run_tests(&mut env.run_test(binary))?;
+                    total.passed += counts.passed;
+                    total.failed += counts.failed;
+                    total.ignored += counts.ignored;
+                }
+                Ok(total)
+            })?;
             // The `egoexo` the native build made; `cargo build -p egoexo-cli` would resolve
             // other features for its dependencies and compile much of the workspace again.
             let built_by_native_tests = root.join("target").join("debug").join("egoexo");
@@ -307,11 +317,144 @@ pub fn run(root: &Path, native: bool, wasm: bool) -> Result<()> {
     Ok(())
 }
 
-/// One `cargo test` selection of the named test targets (crate, test) of several crates.
-/// `--test` applies to every selected crate, so each name must be one crate's only.
-fn test_targets_selection<'a>(targets: &[(&'a str, &'a str)]) -> Vec<&'a str> {
-    let crates = targets.iter().flat_map(|(krate, _)| ["--package", *krate]);
-    crates.chain(targets.iter().flat_map(|(_, test)| ["--test", *test])).collect()
+/// The `cargo test` arguments that build [`WASM_TESTS`] in one invocation, and which of the
+/// binaries it makes to run.
+struct WasmSelection {
+    tests: &'static [WasmTests],
+    /// `--package …`, `--lib`, `--test …`.
+    args: Vec<String>,
+}
+
+/// A wasm test binary to run: its crate's folder (the working directory, as cargo would set
+/// it) and the file.
+#[derive(Debug)]
+struct WasmTestBinary {
+    crate_dir: std::path::PathBuf,
+    path: std::path::PathBuf,
+}
+
+impl WasmSelection {
+    /// The arguments for `tests`. Every `--test NAME` selects that test in each selected crate,
+    /// so a name two of these crates use would build a native-only test for wasm32: refused.
+    fn new(root: &Path, tests: &'static [WasmTests]) -> Result<Self> {
+        let mut packages: Vec<&str> = Vec::new();
+        for t in tests {
+            if !packages.contains(&t.package()) {
+                packages.push(t.package());
+            }
+        }
+        let mut names: Vec<String> = Vec::new();
+        for t in tests {
+            match *t {
+                WasmTests::Crate(package) => names.extend(integration_tests(&root.join("crates").join(package))?),
+                WasmTests::Target(_, test) => names.push(test.to_string()),
+            }
+        }
+        let mut tests_of = Vec::new();
+        for package in &packages {
+            tests_of.push((*package, integration_tests(&root.join("crates").join(package))?));
+        }
+        for name in &names {
+            let owners: Vec<&str> = tests_of.iter().filter(|(_, t)| t.contains(name)).map(|(p, _)| *p).collect();
+            if owners.len() > 1 {
+                anyhow::bail!(
+                    "the wasm tests select `--test {name}`, which {owners:?} all have: rename one (one \
+                     `cargo test` builds every wasm test, and `--test` applies to each crate)"
+                );
+            }
+        }
+        let mut args: Vec<String> = packages.iter().flat_map(|p| ["--package".to_string(), p.to_string()]).collect();
+        args.push("--lib".into());
+        args.extend(names.into_iter().flat_map(|n| ["--test".to_string(), n]));
+        Ok(Self { tests, args })
+    }
+
+    /// Builds every wasm test (`--no-run`) and returns the binaries to run, in
+    /// [`WASM_TESTS`]' order.
+    fn build(&self, root: &Path) -> Result<Vec<WasmTestBinary>> {
+        let mut c = Command::new("cargo");
+        c.arg("test")
+            .args(["--profile", web::WASM_PROFILE, "--target", web::WASM_TARGET, "--no-run"])
+            .arg("--message-format=json-render-diagnostics")
+            .args(&self.args);
+        let messages = cmd::json_lines(&mut c)?;
+        // The app's modules, which `dist/` is assembled from: built as the libraries of the
+        // worker's and the viewer's integration tests.
+        for (package, lib) in web::MODULES {
+            let wanted = web::module_built_by_tests(root, lib);
+            let made = messages.iter().any(|m| {
+                m["reason"] == "compiler-artifact"
+                    && m["profile"]["test"] == false
+                    && m["target"]["name"] == *lib
+                    && m["filenames"].as_array().is_some_and(|f| f.iter().any(|f| f.as_str() == wanted.to_str()))
+            });
+            if !made {
+                anyhow::bail!("the wasm test build did not report {} ({package})", wanted.display());
+            }
+        }
+        let built = test_executables(&messages);
+        let mut binaries = Vec::new();
+        for t in self.tests {
+            let crate_dir = root.join("crates").join(t.package());
+            let manifest = crate_dir.join("Cargo.toml");
+            let mut found = built.iter().filter(|b| b.manifest == manifest).filter(|b| match *t {
+                WasmTests::Crate(_) => true,
+                WasmTests::Target(_, test) => b.kind == "test" && b.name == test,
+            });
+            let before = binaries.len();
+            binaries
+                .extend(found.by_ref().map(|b| WasmTestBinary { crate_dir: crate_dir.clone(), path: b.path.clone() }));
+            if binaries.len() == before {
+                anyhow::bail!("the wasm test build made no test binary for {t:?}");
+            }
+        }
+        Ok(binaries)
+    }
+}
+
+/// The integration tests of the crate at `dir`: the stems of its `tests/*.rs`.
+fn integration_tests(dir: &Path) -> Result<Vec<String>> {
+    let tests = dir.join("tests");
+    let mut names = Vec::new();
+    if tests.is_dir() {
+        for entry in std::fs::read_dir(&tests).with_context(|| format!("listing {}", tests.display()))? {
+            let path = entry?.path();
+            if path.extension().is_some_and(|e| e == "rs") && path.is_file() {
+                names.extend(path.file_stem().map(|s| s.to_string_lossy().into_owned()));
+            }
+        }
+    }
+    names.sort();
+    Ok(names)
+}
+
+/// A test executable cargo reported building.
+#[derive(Debug, PartialEq)]
+struct BuiltTest {
+    /// The crate's `Cargo.toml`.
+    manifest: std::path::PathBuf,
+    /// `lib` (unit tests) or `test`.
+    kind: String,
+    name: String,
+    path: std::path::PathBuf,
+}
+
+/// The test executables among cargo's `--message-format=json` messages.
+fn test_executables(messages: &[serde_json::Value]) -> Vec<BuiltTest> {
+    messages
+        .iter()
+        .filter(|m| m["reason"] == "compiler-artifact" && m["profile"]["test"] == true)
+        .filter_map(|m| {
+            let kinds = m["target"]["kind"].as_array()?;
+            let kind = if kinds.iter().any(|k| k == "test") { "test" } else { "lib" };
+            Some(BuiltTest {
+                manifest: m["manifest_path"].as_str()?.into(),
+                kind: kind.into(),
+                name: m["target"]["name"].as_str()?.into(),
+                path: m["executable"].as_str()?.into(),
+            })
+        })
+        .collect()
 }
 
 /// What the web app's browser run produced.
@@ -357,15 +500,12 @@ struct WasmTestEnv {
 }
 
 impl WasmTestEnv {
-    /// `cargo test` of `selection` for wasm32 in the app's profile, run in headless Chromium.
-    /// The build (`--no-run`) and the run get the same environment, so the run rebuilds nothing.
-    fn cargo_test(&self, selection: &[&str]) -> Command {
-        let mut c = Command::new("cargo");
-        c.arg("test")
-            .args(["--profile", web::WASM_PROFILE])
-            .args(selection)
-            .args(["--target", "wasm32-unknown-unknown"])
-            .env("CARGO_TARGET_WASM32_UNKNOWN_UNKNOWN_RUNNER", &self.tools.wasm_bindgen_test_runner)
+    /// Runs one built wasm test binary in headless Chromium, from its crate's folder as
+    /// `cargo test` would.
+    fn run_test(&self, binary: &WasmTestBinary) -> Command {
+        let mut c = Command::new(&self.tools.wasm_bindgen_test_runner);
+        c.arg(&binary.path)
+            .current_dir(&binary.crate_dir)
             .env("CHROMEDRIVER", &self.tools.chromedriver)
             .env("WASM_BINDGEN_TEST_WEBDRIVER_JSON", &self.webdriver_json)
             .env("WASM_BINDGEN_TEST_TIMEOUT", "300");
@@ -390,6 +530,24 @@ fn write_webdriver_json(root: &Path, chromium: &Path) -> Result<std::path::PathB
 mod tests {
     use super::*;
 
+    #[test]
+    fn the_wasm_tests_build_in_one_selection_without_a_shared_test_name() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+        let selection = WasmSelection::new(root, WASM_TESTS).unwrap();
+        let args = selection.args.join(" ");
+        assert!(args.starts_with("--package egoexo-viewer --package egoexo-core --package egoexo-video"), "{args}");
+        assert!(args.contains(" --lib "), "{args}");
+        for test in ["browser", "rotations", "worker_wasm", "parity_wasm", "export_wasm", "import_wasm"] {
+            assert!(args.contains(&format!("--test {test}")), "{test} missing from {args}");
+        }
+        // A name two selected crates share is refused: `--test live` would build both crates'
+        // `live` tests (egoexo-register's too), whatever the entry meant.
+        const CLASH: &[WasmTests] =
+            &[WasmTests::Target("egoexo-web-worker", "live"), WasmTests::Target("egoexo-register", "register")];
+        let error = WasmSelection::new(root, CLASH).err().expect("a shared test name is refused").to_string();
+        assert!(error.contains("`--test live`"), "{error}");
+    }
+
     /// The `{ opt-level = 0 }` entries of the `[profile.<profile>.package]` table.
     fn unoptimised_crates(cargo_toml: &str, profile: &str) -> Vec<String> {
         let header = format!("[profile.{profile}.package]");
@@ -409,6 +567,35 @@ mod tests {
         for name in &dev {
             assert!(lock.contains(&format!("name = \"{name}\"\n")), "{name} is not in Cargo.lock");
         }
+    }
+
+    #[test]
+    fn finds_the_test_executables_among_cargo_messages() {
+        let lines = [
+            r#"{"reason":"compiler-artifact","manifest_path":"/w/crates/a/Cargo.toml","target":{"kind":["cdylib","rlib"],"name":"a"},"profile":{"test":true},"executable":"/t/deps/a-1.wasm"}"#,
+            r#"{"reason":"compiler-artifact","manifest_path":"/w/crates/a/Cargo.toml","target":{"kind":["cdylib","rlib"],"name":"a"},"profile":{"test":false},"executable":null}"#,
+            r#"{"reason":"compiler-artifact","manifest_path":"/w/crates/b/Cargo.toml","target":{"kind":["test"],"name":"b_wasm"},"profile":{"test":true},"executable":"/t/deps/b_wasm-2.wasm"}"#,
+            r#"{"reason":"build-finished","success":true}"#,
+        ];
+        let messages: Vec<serde_json::Value> = lines.iter().map(|l| serde_json::from_str(l).unwrap()).collect();
+        let built = test_executables(&messages);
+        assert_eq!(
+            built,
+            vec![
+                BuiltTest {
+                    manifest: "/w/crates/a/Cargo.toml".into(),
+                    kind: "lib".into(),
+                    name: "a".into(),
+                    path: "/t/deps/a-1.wasm".into()
+                },
+                BuiltTest {
+                    manifest: "/w/crates/b/Cargo.toml".into(),
+                    kind: "test".into(),
+                    name: "b_wasm".into(),
+                    path: "/t/deps/b_wasm-2.wasm".into()
+                },
+            ]
+        );
     }
 
     #[test]

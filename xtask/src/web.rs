@@ -24,16 +24,20 @@ pub const WASM_DIST_PROFILE: &str = "wasm-dist";
 pub enum WasmBuild {
     /// What users download: [`WASM_DIST_PROFILE`], the name section stripped.
     Shipped,
-    /// What the tests run: [`WASM_PROFILE`] (shares its compiled dependencies with the wasm
-    /// tests; function names kept for stack traces).
+    /// What the tests run: [`WASM_PROFILE`] (function names kept for stack traces), built
+    /// here, each module with its own crate's features.
     Tests,
+    /// [`WASM_PROFILE`]'s modules as the wasm test build left them (`cargo xtask test` builds
+    /// every wasm test in one invocation, which builds both modules too, with the features of
+    /// all those tests together): nothing is compiled here.
+    BuiltByWasmTests,
 }
 
 impl WasmBuild {
     pub fn profile(self) -> &'static str {
         match self {
             Self::Shipped => WASM_DIST_PROFILE,
-            Self::Tests => WASM_PROFILE,
+            Self::Tests | Self::BuiltByWasmTests => WASM_PROFILE,
         }
     }
 }
@@ -86,15 +90,23 @@ pub fn build_dist(root: &Path, models: &Path, build: WasmBuild, wasm_opt: WasmOp
         WasmOpt::IfAvailable => find_wasm_opt(root),
         WasmOpt::Off => None,
     };
-    if wasm_opt.is_none() && build == WasmBuild::Tests {
+    if wasm_opt.is_none() && build != WasmBuild::Shipped {
         eprintln!("note: the tests' build of the wasm modules (profile {WASM_PROFILE}), not the shipped one");
     }
     let pkg = root.join("target").join("web").join("pkg");
     std::fs::create_dir_all(&pkg)?;
     let mut sizes = Vec::new();
     for (package, lib) in MODULES {
-        build_module(package, build.profile())?;
-        let wasm = root.join("target").join(WASM_TARGET).join(build.profile()).join(format!("{lib}.wasm"));
+        let wasm = if build == WasmBuild::BuiltByWasmTests {
+            let wasm = module_built_by_tests(root, lib);
+            if !wasm.is_file() {
+                bail!("{} is missing: the wasm test build did not make it", wasm.display());
+            }
+            wasm
+        } else {
+            build_module(package, build.profile())?;
+            root.join("target").join(WASM_TARGET).join(build.profile()).join(format!("{lib}.wasm"))
+        };
         cmd::run(
             Command::new(&wasm_bindgen).arg(&wasm).args(["--target", "web", "--no-typescript", "--out-dir"]).arg(&pkg),
         )?;
@@ -133,6 +145,12 @@ pub fn build_dist(root: &Path, models: &Path, build: WasmBuild, wasm_opt: WasmOp
         });
     }
     Ok(sizes)
+}
+
+/// Where a test build leaves the module `lib` (a `cdylib` built as the library of an
+/// integration test is not copied up from `deps/`, as `cargo build` does).
+pub fn module_built_by_tests(root: &Path, lib: &str) -> PathBuf {
+    root.join("target").join(WASM_TARGET).join(WASM_PROFILE).join("deps").join(format!("{lib}.wasm"))
 }
 
 /// `cargo build` of one browser crate (one invocation per crate, so each crate's dependency

@@ -397,13 +397,12 @@ impl WasmSelection {
         for t in self.tests {
             let crate_dir = root.join("crates").join(t.package());
             let manifest = crate_dir.join("Cargo.toml");
-            let mut found = built.iter().filter(|b| b.manifest == manifest).filter(|b| match *t {
+            let found = built.iter().filter(|b| b.manifest == manifest).filter(|b| match *t {
                 WasmTests::Crate(_) => true,
                 WasmTests::Target(_, test) => b.kind == "test" && b.name == test,
             });
             let before = binaries.len();
-            binaries
-                .extend(found.by_ref().map(|b| WasmTestBinary { crate_dir: crate_dir.clone(), path: b.path.clone() }));
+            binaries.extend(found.map(|b| WasmTestBinary { crate_dir: crate_dir.clone(), path: b.path.clone() }));
             if binaries.len() == before {
                 anyhow::bail!("the wasm test build made no test binary for {t:?}");
             }

@@ -26,14 +26,67 @@ const ui = {
   cropSource: $('crop-source'),
   framesSent: $('frames-sent'),
   registration: $('registration'),
+  screen: $('screen-state'),
 };
 
 const nowNs = () => (performance.timeOrigin + performance.now()) * 1e6;
 
 const page = { form: null, run: null }; // form: the JoinForm (made once the wasm module is in)
 
+// Keeps the screen on while observing: a phone on a stand would dim, lock and stop its camera.
+// The Screen Wake Lock API; the browser lets go of the lock whenever the page is hidden, so it
+// is taken again when the page is shown. `document.body.dataset.screen` says where it stands
+// (held, released, refused, unsupported, off).
+class ScreenAwake {
+  constructor() {
+    this.sentinel = null;
+    this.wanted = false;
+    this.onVisibility = () => {
+      if (this.wanted && document.visibilityState === 'visible') this.take();
+    };
+  }
 
+  hold() {
+    this.wanted = true;
+    document.addEventListener('visibilitychange', this.onVisibility);
+    this.take();
+  }
 
+  async take() {
+    if (this.sentinel && !this.sentinel.released) return;
+    if (!('wakeLock' in navigator)) {
+      this.show('unsupported', 'may sleep: this browser cannot keep it on (no Screen Wake Lock) — keep it awake in the device\'s settings');
+      return;
+    }
+    try {
+      const sentinel = await navigator.wakeLock.request('screen');
+      if (!this.wanted) {
+        sentinel.release().catch(() => {});
+        return;
+      }
+      this.sentinel = sentinel;
+      sentinel.addEventListener('release', () => {
+        if (this.wanted) this.show('released', 'let go while the page was hidden: kept on again once it is shown');
+      });
+      this.show('held', 'kept on while observing');
+    } catch (error) {
+      this.show('refused', `may sleep: the browser refused to keep it on (${message(error)})`);
+    }
+  }
+
+  release() {
+    this.wanted = false;
+    document.removeEventListener('visibilitychange', this.onVisibility);
+    this.sentinel?.release().catch(() => {});
+    this.sentinel = null;
+    this.show('off', '—');
+  }
+
+  show(state, text) {
+    document.body.dataset.screen = state;
+    ui.screen.textContent = text;
+  }
+}
 
 // Frames per second over the last second, from the times they happened.
 class Rate {
@@ -78,6 +131,7 @@ class Observation {
     this.detectMs = [];
     this.last = null; // the newest detection, for the overlay
     this.uiTimer = setInterval(() => this.showStats(), 250);
+    this.awake = new ScreenAwake();
   }
 
   async start() {
@@ -105,6 +159,7 @@ class Observation {
     this.worker.onerror = (event) => this.fail(`The detector stopped: ${event.message ?? 'an error in its worker'}`);
     this.track.addEventListener('ended', () => this.fail('The camera stopped (unplugged, or taken by another app).'));
     this.relay.connect();
+    this.awake.hold();
     this.nextFrame();
   }
 
@@ -168,6 +223,7 @@ class Observation {
     if (this.ended) return;
     this.ended = true;
     clearInterval(this.uiTimer);
+    this.awake.release();
     this.showStats();
     this.relay.close(closeReason);
     this.worker?.terminate();

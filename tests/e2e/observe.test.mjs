@@ -99,6 +99,9 @@ describe('observer page', () => {
     t.diagnostic(`camera page: ${await camera.text('#detect-rate')}; region ${await camera.text('#crop-source')}`);
     assert.ok(found >= 30);
     assert.match(await camera.text('#camera-info'), /480×480, \d+(\.\d+)?° wide/);
+    // The screen is kept on while it observes (a phone on a stand would lock and stop its camera).
+    assert.equal(await camera.page.evaluate(() => document.body.dataset.screen), 'held', await camera.text('#screen-state'));
+    assert.equal(await camera.text('#screen-state'), 'kept on while observing');
 
     // The watching page lists it, with its keypoints' rate, as a camera being registered.
     const listed = await waitFor('the camera listed', () => live(app), (l) => l.devices.some((d) => d.device === 'tripod' && d.rates_hz.some(([s, hz]) => s === 'keypoints' && hz > 3)));
@@ -133,6 +136,10 @@ describe('observer page', () => {
       assert.ok((fused.l.lastFrame?.exo_observers ?? []).includes('tripod'), `the replay ended before its rays were fused: ${JSON.stringify(fused.l.lastFrame)}`);
     });
     await replay;
+    // Stop lets the screen sleep again.
+    await camera.page.getByRole('button', { name: 'Stop' }).click();
+    assert.equal(await camera.waitState(['ready', 'error']), 'ready', await camera.text('#error-message'));
+    assert.equal(await camera.page.evaluate(() => document.body.dataset.screen), 'off');
     assert.deepEqual(camera.errors, []);
     assert.deepEqual(app.errors, []);
     await camera.close();

@@ -343,16 +343,17 @@ impl WasmSelection {
                 packages.push(t.package());
             }
         }
+        let mut tests_of: Vec<(&str, Vec<String>)> = Vec::new();
+        for package in &packages {
+            tests_of.push((*package, integration_tests(&root.join("crates").join(package))?));
+        }
+        let of = |package: &str| tests_of.iter().find(|(p, _)| *p == package).map(|(_, t)| t.clone());
         let mut names: Vec<String> = Vec::new();
         for t in tests {
             match *t {
-                WasmTests::Crate(package) => names.extend(integration_tests(&root.join("crates").join(package))?),
+                WasmTests::Crate(package) => names.extend(of(package).unwrap_or_default()),
                 WasmTests::Target(_, test) => names.push(test.to_string()),
             }
-        }
-        let mut tests_of = Vec::new();
-        for package in &packages {
-            tests_of.push((*package, integration_tests(&root.join("crates").join(package))?));
         }
         for name in &names {
             let owners: Vec<&str> = tests_of.iter().filter(|(_, t)| t.contains(name)).map(|(p, _)| *p).collect();

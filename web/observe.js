@@ -40,6 +40,7 @@ const page = { form: null, run: null }; // form: the JoinForm (made once the was
 class ScreenAwake {
   constructor() {
     this.sentinel = null;
+    this.pending = false;
     this.wanted = false;
     this.onVisibility = () => {
       if (this.wanted && document.visibilityState === 'visible') this.take();
@@ -53,11 +54,13 @@ class ScreenAwake {
   }
 
   async take() {
-    if (this.sentinel && !this.sentinel.released) return;
+    // One request at a time: the page shown again while the first is pending does not ask twice.
+    if (this.pending || (this.sentinel && !this.sentinel.released)) return;
     if (!('wakeLock' in navigator)) {
       this.show('unsupported', 'may sleep: this browser cannot keep it on (no Screen Wake Lock) — keep it awake in the device\'s settings');
       return;
     }
+    this.pending = true;
     try {
       const sentinel = await navigator.wakeLock.request('screen');
       if (!this.wanted) {
@@ -71,6 +74,8 @@ class ScreenAwake {
       this.show('held', 'kept on while observing');
     } catch (error) {
       this.show('refused', `may sleep: the browser refused to keep it on (${message(error)})`);
+    } finally {
+      this.pending = false;
     }
   }
 

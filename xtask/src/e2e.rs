@@ -38,9 +38,9 @@ impl BrowserRun {
         c
     }
 
-    /// `egoexo serve` on `dist/` with an empty share store.
-    fn serve(&self, root: &Path) -> Result<serve::Running> {
-        let store = self.out.join("shares");
+    /// `egoexo serve` on `dist/` with an empty share store, `shares-{lane}`.
+    fn serve(&self, root: &Path, lane: usize) -> Result<serve::Running> {
+        let store = self.out.join(format!("shares-{lane}"));
         if store.exists() {
             std::fs::remove_dir_all(&store).with_context(|| format!("clearing {}", store.display()))?;
         }
@@ -48,35 +48,148 @@ impl BrowserRun {
     }
 }
 
-/// Serves `dist/` and runs every `tests/e2e/*.test.mjs`; returns the counts.
+/// The browser test files that measure (time to first skeleton; the hour-long session's rate
+/// and memory): they run one after the other once the rest are done, with no other browser
+/// beside them, so that their figures are comparable from run to run.
+pub const RUN_ALONE: &[&str] = &["hour.test.mjs", "startup.test.mjs"];
+
+/// How many of the other test files run at once. Each lane has its own server (its own share
+/// store and per-client rate limits: every test connects from 127.0.0.1) and runs its files one
+/// at a time, taking the next from a queue shared by the lanes. Two on this 2-core machine: one
+/// file at a time kept ~1.6 cores busy (the live tests stream in real time, the pages wait on
+/// their workers); two keep both busy (docs/performance.md has the suite's times).
+const LANES: usize = 2;
+
+/// Serves `dist/` and runs every `tests/e2e/*.test.mjs`: the files not in [`RUN_ALONE`] in
+/// [`LANES`] lanes, then those, alone. Each file's report is printed whole when it ends.
 pub fn run_suite(root: &Path, run: &BrowserRun) -> Result<TestCounts> {
     std::fs::create_dir_all(&run.out)?;
-    let server = run.serve(root)?;
-    let dir = root.join("tests").join("e2e");
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .with_context(|| format!("reading {}", dir.display()))?
-        .map(|e| e.map(|e| e.path()))
-        .collect::<std::io::Result<_>>()?;
-    files.retain(|p| p.to_string_lossy().ends_with(".test.mjs"));
-    files.sort();
-    let tap = run.out.join("results.tap");
-    let status = {
-        let mut c = run.node(root, &server.url);
-        c.args(["--test", "--test-concurrency=1", "--test-reporter=spec", "--test-reporter-destination=stdout"])
-            .arg("--test-reporter=tap")
-            .arg(format!("--test-reporter-destination={}", tap.display()))
-            .args(&files);
-        eprintln!("$ node --test {} (app at {})", files.len(), server.url);
-        c.status().context("running node (is Node.js installed?)")?
-    };
-    let counts = tap_counts(&std::fs::read_to_string(&tap).unwrap_or_default());
-    if !status.success() || counts.failed > 0 {
-        bail!("the browser end-to-end tests failed ({} passed, {} failed)", counts.passed, counts.failed);
+    let (alone, shared) = test_files(&root.join("tests").join("e2e"))?;
+    let reports = run.out.join("reports");
+    if reports.exists() {
+        std::fs::remove_dir_all(&reports).with_context(|| format!("clearing {}", reports.display()))?;
+    }
+    std::fs::create_dir_all(&reports)?;
+    let servers = (0..LANES).map(|lane| run.serve(root, lane)).collect::<Result<Vec<_>>>()?;
+    eprintln!(
+        "$ node --test: {} files in {LANES} lanes (app at {}), then {} alone",
+        shared.len(),
+        servers.iter().map(|s| s.url.as_str()).collect::<Vec<_>>().join(", "),
+        alone.len()
+    );
+    let queue = std::sync::Mutex::new(std::collections::VecDeque::from(shared));
+    let print = std::sync::Mutex::new(());
+    let mut outcomes: Vec<FileOutcome> = std::thread::scope(|scope| {
+        let lanes: Vec<_> = servers
+            .iter()
+            .map(|server| {
+                let (queue, print, reports) = (&queue, &print, reports.as_path());
+                scope.spawn(move || -> Result<Vec<FileOutcome>> {
+                    let mut done = Vec::new();
+                    loop {
+                        let Some(file) = queue.lock().map_err(|_| anyhow::anyhow!("a lane panicked"))?.pop_front()
+                        else {
+                            return Ok(done);
+                        };
+                        done.push(run_file(root, run, &server.url, &file, reports, Some(print))?);
+                    }
+                })
+            })
+            .collect();
+        lanes.into_iter().try_fold(Vec::new(), |mut all, lane| {
+            all.extend(lane.join().map_err(|_| anyhow::anyhow!("a lane of browser tests panicked"))??);
+            Ok::<_, anyhow::Error>(all)
+        })
+    })?;
+    for file in &alone {
+        outcomes.push(run_file(root, run, &servers[0].url, file, &reports, None)?);
+    }
+    let mut counts = TestCounts::default();
+    let mut failed_files = Vec::new();
+    for outcome in &outcomes {
+        counts.passed += outcome.counts.passed;
+        counts.failed += outcome.counts.failed;
+        counts.ignored += outcome.counts.ignored;
+        if !outcome.success || outcome.counts.failed > 0 {
+            failed_files.push(outcome.name.clone());
+        }
+    }
+    if !failed_files.is_empty() {
+        bail!(
+            "the browser end-to-end tests failed ({} passed, {} failed; in {})",
+            counts.passed,
+            counts.failed,
+            failed_files.join(", ")
+        );
     }
     if counts.passed == 0 {
         bail!("the browser end-to-end tests ran no test");
     }
     Ok(counts)
+}
+
+/// `tests/e2e/*.test.mjs` by name: (those in [`RUN_ALONE`], the others).
+fn test_files(dir: &Path) -> Result<(Vec<PathBuf>, Vec<PathBuf>)> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("reading {}", dir.display()))?
+        .map(|e| e.map(|e| e.path()))
+        .collect::<std::io::Result<_>>()?;
+    files.retain(|p| p.to_string_lossy().ends_with(".test.mjs"));
+    files.sort();
+    for name in RUN_ALONE {
+        if !files.iter().any(|f| f.file_name().is_some_and(|n| n == *name)) {
+            bail!("{} has no {name}, which e2e::RUN_ALONE names", dir.display());
+        }
+    }
+    Ok(files.into_iter().partition(|f| f.file_name().is_some_and(|n| RUN_ALONE.iter().any(|a| n == *a))))
+}
+
+/// One test file's run.
+#[derive(Debug)]
+struct FileOutcome {
+    name: String,
+    success: bool,
+    counts: TestCounts,
+}
+
+/// Runs one test file against the server at `url`. In a lane (`print` given) its spec report
+/// goes to `reports/` and is printed whole, under `print`, when the file ends; alone, it is
+/// printed as it runs.
+fn run_file(
+    root: &Path,
+    run: &BrowserRun,
+    url: &str,
+    file: &Path,
+    reports: &Path,
+    print: Option<&std::sync::Mutex<()>>,
+) -> Result<FileOutcome> {
+    let name = file.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let tap = reports.join(format!("{name}.tap"));
+    let spec = reports.join(format!("{name}.spec"));
+    let mut c = run.node(root, url);
+    c.args(["--test", "--test-reporter=spec"])
+        .arg(format!(
+            "--test-reporter-destination={}",
+            if print.is_some() { spec.display().to_string() } else { "stdout".into() }
+        ))
+        .arg("--test-reporter=tap")
+        .arg(format!("--test-reporter-destination={}", tap.display()))
+        .arg(file);
+    let started = std::time::Instant::now();
+    if print.is_none() {
+        eprintln!("$ node --test {name} (alone, app at {url})");
+    }
+    let status = c.status().with_context(|| format!("running node on {name} (is Node.js installed?)"))?;
+    let counts = tap_counts(&std::fs::read_to_string(&tap).unwrap_or_default());
+    if let Some(print) = print {
+        let _turn = print.lock().map_err(|_| anyhow::anyhow!("a lane panicked while printing"))?;
+        eprintln!("$ node --test {name} (app at {url}): {:.0} s", started.elapsed().as_secs_f64());
+        let report = std::fs::read_to_string(&spec).unwrap_or_default();
+        print!("{report}");
+        use std::io::Write as _;
+        std::io::stdout().flush()?;
+    }
+    Ok(FileOutcome { name, success: status.success(), counts })
 }
 
 /// Counts from a TAP report's closing `# pass N` / `# fail N` / `# skipped N` lines.
@@ -119,7 +232,7 @@ pub struct BenchResult {
 /// Serves `dist/` and runs `web/bench.html` `runs` times through `tests/e2e/bench.mjs`.
 pub fn run_bench(root: &Path, run: &BrowserRun, runs: u32) -> Result<BenchResult> {
     std::fs::create_dir_all(&run.out)?;
-    let server = run.serve(root)?;
+    let server = run.serve(root, 0)?;
     let script = root.join("tests").join("e2e").join("bench.mjs");
     let out = cmd::output_checked(run.node(root, &server.url).arg(&script).arg(runs.to_string()))?;
     parse_bench_line(&out, "BENCH")
@@ -191,7 +304,7 @@ pub fn run_native_networks(models: &Path, points: u8, runs: u32) -> Result<serde
 /// JSON.
 pub fn run_live_bench(root: &Path, run: &BrowserRun, seconds: u32) -> Result<serde_json::Value> {
     std::fs::create_dir_all(&run.out)?;
-    let server = run.serve(root)?;
+    let server = run.serve(root, 0)?;
     let script = root.join("tests").join("e2e").join("live-bench.mjs");
     let out = cmd::output_checked(run.node(root, &server.url).arg(&script).arg(seconds.to_string()))?;
     let line = out
@@ -235,6 +348,25 @@ pub fn run_native_reference(root: &Path, models: &Path, runs: u32) -> Result<Ben
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_measuring_files_run_alone_and_the_rest_in_lanes() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("tests").join("e2e");
+        let (alone, shared) = test_files(&dir).unwrap();
+        let names = |files: &[PathBuf]| -> Vec<String> {
+            files.iter().map(|f| f.file_name().unwrap().to_string_lossy().into_owned()).collect()
+        };
+        assert_eq!(names(&alone), RUN_ALONE);
+        let shared = names(&shared);
+        assert!(shared.contains(&"live.test.mjs".to_string()), "{shared:?}");
+        assert!(shared.iter().all(|n| n.ends_with(".test.mjs") && !RUN_ALONE.contains(&n.as_str())), "{shared:?}");
+        // A name that is not there is refused, not skipped.
+        let empty = std::env::temp_dir().join(format!("egoexo-e2e-empty-{}", std::process::id()));
+        std::fs::create_dir_all(&empty).unwrap();
+        let error = test_files(&empty).unwrap_err().to_string();
+        std::fs::remove_dir_all(&empty).unwrap();
+        assert!(error.contains("hour.test.mjs"), "{error}");
+    }
 
     #[test]
     fn bench_lines_parse_by_their_own_prefix() {

@@ -4,7 +4,7 @@
 //! decoder — frames handed in by sample index, as the browser's runtime does. The keypoints
 //! land in the session, the reconstruction uses the observers, and a saved session carries
 //! its videos and the found keypoints. The browser's path (WebCodecs, the canvas crop) is
-//! `tests/e2e/app.test.mjs`'s "observer video" test.
+//! `tests/e2e/detect.test.mjs`.
 #![cfg(not(target_arch = "wasm32"))]
 
 use egoexo_core::crop::resample_rgb;

@@ -218,8 +218,11 @@ describe('live capture', () => {
       assert.match(await app.text('#live-devices'), /registered: yaw -?\d+\.\d°/);
       // The re-centred observer is seen to jump, left out, and registered again.
       const jumped = await waitFor(app, (l) => (l.lastFrame?.observer_worlds ?? []).some((o) => o.observer === 'observer-1' && o.jumps === 1), 'the jump seen', 60_000);
+      // Not before the re-centring: frames are on the relay's clock, to which each device's clock
+      // is mapped through pings, so a loaded machine's round trips put the jump a few frames
+      // either side of 12 s (seen: frame 356 with two browser test files at once).
       const jumpedFrame = jumped.lastFrame.frame;
-      assert.ok(jumpedFrame / 30 >= 12, `a jump seen at frame ${jumpedFrame}`);
+      assert.ok(jumpedFrame / 30 >= 12 - 0.25, `a jump seen at frame ${jumpedFrame}`);
       const again = await waitFor(app, (l) => (l.lastFrame?.observer_worlds ?? []).some((o) => o.observer === 'observer-1' && o.jumps === 1 && o.state === 'registered'), 'registered again', 60_000);
       t.diagnostic(`observer-1 re-centred at 12 s, registered again by ${(again.lastFrame.frame / 30).toFixed(1)} s`);
       // The registration is the truth the replay drew (yaw, and the translation at the origin):

@@ -10,7 +10,7 @@ import { readFileSync } from 'node:fs';
 import { join } from 'node:path';
 import { after, before, describe, test } from 'node:test';
 
-import { OUT, decodePng, launch, openApp, savePng, skeletonPixels } from './browser.mjs';
+import { OUT, chromiumForFile, decodePng, openApp, savePng, skeletonPixels } from './browser.mjs';
 
 const REPO = new URL('../../', import.meta.url).pathname;
 // The tests' Python (PyAV decodes the video export); `cargo xtask test` sets it.
@@ -21,18 +21,12 @@ const SAMPLE = SAMPLES.samples[0];
 // none; the body is small in the viewer's whole-scene framing).
 const MIN_SIDE_PIXELS = 20;
 
-let browser;
-before(async () => {
-  browser = await launch();
-});
-after(async () => {
-  await browser?.close();
-});
+const browser = chromiumForFile();
 
 describe('the sample, WebGL2 canvas', () => {
   let app;
   before(async () => {
-    app = await openApp(browser, '?backend=webgl2');
+    app = await openApp(browser(), '?backend=webgl2');
   });
   after(async () => {
     await app?.close();

@@ -4,6 +4,7 @@
 import { spawn } from 'node:child_process';
 import { mkdirSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
+import { after, before } from 'node:test';
 import { chromium } from 'playwright-core';
 import { PNG } from 'pngjs';
 
@@ -34,6 +35,19 @@ export function launch(extraArgs = []) {
     headless: true,
     args: [...ARGS, ...extraArgs],
   });
+}
+
+// One Chromium for a test file: launched before its first test, closed after its last. Returns
+// a getter, since the browser exists only once the `before` hook has run.
+export function chromiumForFile(extraArgs = []) {
+  let browser;
+  before(async () => {
+    browser = await launch(extraArgs);
+  });
+  after(async () => {
+    await browser?.close();
+  });
+  return () => browser;
 }
 
 // Opens the app in a fresh context (its own Cache API storage) and records every console

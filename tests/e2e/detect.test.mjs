@@ -5,9 +5,9 @@ import assert from 'node:assert/strict';
 import { execFileSync } from 'node:child_process';
 import { readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
-import { after, before, describe, test } from 'node:test';
+import { describe, test } from 'node:test';
 
-import { OUT, launch, openApp } from './browser.mjs';
+import { OUT, chromiumForFile, openApp } from './browser.mjs';
 
 const REPO = new URL('../../', import.meta.url).pathname;
 // The CLI the tests make sessions with (the same build as the server's).
@@ -15,13 +15,7 @@ const BIN = process.env.EGOEXO_BIN ?? join(REPO, 'target/debug/egoexo');
 // The tests' Python (PyAV decodes the video export); `cargo xtask test` sets it.
 const PYTHON = process.env.EGOEXO_PYTHON;
 
-let browser;
-before(async () => {
-  browser = await launch();
-});
-after(async () => {
-  await browser?.close();
-});
+const browser = chromiumForFile();
 
 describe('observer video: the detector step in the worker', () => {
   // A simulated walk whose two observers bring only H.264 video (the wearer rendered through
@@ -32,7 +26,7 @@ describe('observer video: the detector step in the worker', () => {
     const byCli = join(OUT, 'walk-video-cli.egoexo');
     execFileSync(BIN, ['walk', '--seconds', '4', '--video', '256', '--seed', '3', '-o', session], { stdio: ['ignore', 'ignore', 'inherit'] });
     execFileSync(BIN, ['keypoints', session, '-o', byCli, '--force', '--models', join(REPO, 'models')], { stdio: ['ignore', 'ignore', 'inherit'] });
-    const app = await openApp(browser, '?backend=webgl2');
+    const app = await openApp(browser(), '?backend=webgl2');
     try {
       await app.waitState('idle');
       // Cancel while the detector runs: the job ends `cancelled`, nothing of it is kept.

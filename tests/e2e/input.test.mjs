@@ -5,9 +5,9 @@ import assert from 'node:assert/strict';
 import { cpSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
-import { after, before, describe, test } from 'node:test';
+import { describe, test } from 'node:test';
 
-import { OUT, launch, openApp } from './browser.mjs';
+import { OUT, chromiumForFile, openApp } from './browser.mjs';
 
 const REPO = new URL('../../', import.meta.url).pathname;
 // A multi-device Aria MPS folder (egoexo-session's committed fixture).
@@ -16,17 +16,11 @@ const ARIA_FOLDER = join(REPO, 'crates/egoexo-session/tests/fixtures/aria_mps');
 // the right hand out of view from 0.2 to 0.5 s, the left from 0.8 to 1.3 s.
 const HANDS_FOLDER = join(REPO, 'crates/egoexo-session/tests/fixtures/aria_mps_hands');
 
-let browser;
-before(async () => {
-  browser = await launch();
-});
-after(async () => {
-  await browser?.close();
-});
+const browser = chromiumForFile();
 
 describe('bad input and failures', () => {
   test('a malformed file shows the importer\'s exact message and the page keeps working', async () => {
-    const app = await openApp(browser, '?backend=webgl2');
+    const app = await openApp(browser(), '?backend=webgl2');
     try {
       await app.waitState('idle');
       await app.page.setInputFiles('#file-input', { name: 'broken.egoexo', mimeType: 'application/zip', buffer: Buffer.from('this is not a zip archive') });
@@ -55,7 +49,7 @@ describe('bad input and failures', () => {
   });
 
   test('a dropped Aria MPS folder imports and reconstructs', async () => {
-    const app = await openApp(browser, '?backend=webgl2');
+    const app = await openApp(browser(), '?backend=webgl2');
     try {
       await app.waitState('idle');
       await app.page.setInputFiles('#folder-input', ARIA_FOLDER);
@@ -75,7 +69,7 @@ describe('bad input and failures', () => {
     const sequence = join(dir, 'sequence');
     cpSync(join(REPO, 'crates/egoexo-session/tests/fixtures/nymeria'), sequence, { recursive: true });
     cpSync(join(REPO, 'crates/egoexo-session/tests/fixtures/nymeria_people'), sequence, { recursive: true });
-    const app = await openApp(browser, '?backend=webgl2');
+    const app = await openApp(browser(), '?backend=webgl2');
     try {
       await app.waitState('idle');
       await app.page.setInputFiles('#folder-input', sequence);
@@ -99,7 +93,7 @@ describe('bad input and failures', () => {
   });
 
   test('an MPS folder with hand tracking: wrist coverage, the floor, 3-point with wrists that come and go, wrists drawn only where tracked', async () => {
-    const app = await openApp(browser, '?backend=webgl2');
+    const app = await openApp(browser(), '?backend=webgl2');
     try {
       await app.waitState('idle');
       await app.page.setInputFiles('#folder-input', HANDS_FOLDER);
@@ -136,7 +130,7 @@ describe('bad input and failures', () => {
   });
 
   test('cancel stops the reconstruction between windows, and the same worker takes the next job', async () => {
-    const app = await openApp(browser, '?backend=webgl2');
+    const app = await openApp(browser(), '?backend=webgl2');
     try {
       await app.waitState('idle');
       // Cancel as soon as the page shows a reconstruction stage, in the page itself: a click
@@ -182,7 +176,7 @@ describe('bad input and failures', () => {
     // first job leaves the helpers for later (they start once it is done), so with a pool the
     // sample runs again until the helper has computed chunks of a job (at most `runs` times).
     const reconstruct = async (workers, runs) => {
-      const app = await openApp(browser, `?backend=webgl2&workers=${workers}`);
+      const app = await openApp(browser(), `?backend=webgl2&workers=${workers}`);
       try {
         assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
         const summaries = [];
@@ -221,7 +215,7 @@ describe('bad input and failures', () => {
   });
 
   test('a worker panic is caught, reported, and the worker replaced', async () => {
-    const app = await openApp(browser, '?backend=webgl2');
+    const app = await openApp(browser(), '?backend=webgl2');
     try {
       await app.waitState('idle');
       await app.page.evaluate(() => window.egoexo.client.panic_for_test());
@@ -243,7 +237,7 @@ describe('bad input and failures', () => {
       fetched += 1;
       return route.continue();
     });
-    const app = await openApp(browser, '?backend=webgl2', { setup: count });
+    const app = await openApp(browser(), '?backend=webgl2', { setup: count });
     try {
       await app.waitState('idle');
       const cached = () => app.page.evaluate(async () => (await (await caches.open('egoexo-models')).keys()).length);
@@ -271,7 +265,7 @@ describe('bad input and failures', () => {
           await route.fulfill({ response, body });
         });
       };
-      const fresh = await openApp(browser, '?backend=webgl2', { setup: corrupt });
+      const fresh = await openApp(browser(), '?backend=webgl2', { setup: corrupt });
       try {
         // The worker loads the models as the page starts: the failure shows without a click.
         await fresh.waitState('error', 120_000);
@@ -291,7 +285,7 @@ describe('bad input and failures', () => {
   });
 
   test('the automatic backend choice ends with a working renderer', async () => {
-    const app = await openApp(browser);
+    const app = await openApp(browser());
     try {
       assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
       assert.match(await app.text('#backend'), /renderer: (webgpu|webgl2)/i);

@@ -4,17 +4,11 @@
 import assert from 'node:assert/strict';
 import { writeFileSync } from 'node:fs';
 import { join } from 'node:path';
-import { after, before, describe, test } from 'node:test';
+import { describe, test } from 'node:test';
 
-import { OUT, launch, openApp } from './browser.mjs';
+import { OUT, chromiumForFile, openApp } from './browser.mjs';
 
-let browser;
-before(async () => {
-  browser = await launch();
-});
-after(async () => {
-  await browser?.close();
-});
+const browser = chromiumForFile();
 
 describe('startup', () => {
   test('time to first skeleton, cold and warm (performance marks; printed and kept in first-skeleton.json)', async () => {
@@ -22,7 +16,7 @@ describe('startup', () => {
     // and Cache API). Warm: the same page reloaded (wasm from the HTTP cache, models from the
     // Cache API). Each time is the page's `egoexo:first-skeleton` mark (navigation start → the
     // frame after the scene was handed to the viewer).
-    const app = await openApp(browser, '?backend=webgl2#sample');
+    const app = await openApp(browser(), '?backend=webgl2#sample');
     // Also the worker's own account of the models: read (Cache API or network) and
     // check + load (sha256, tract), ms.
     const marks = () => app.page.evaluate(() => ({

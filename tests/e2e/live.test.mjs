@@ -12,20 +12,14 @@ import { execFileSync } from 'node:child_process';
 import { mkdtempSync, readFileSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
-import { after, before, describe, test } from 'node:test';
+import { describe, test } from 'node:test';
 
-import { APP_URL, EGOEXO, decodePng, egoexo, launch, openApp, skeletonPixels } from './browser.mjs';
+import { APP_URL, EGOEXO, chromiumForFile, decodePng, egoexo, openApp, skeletonPixels } from './browser.mjs';
 
 const REPO = new URL('../../', import.meta.url).pathname;
 const SAMPLE = `${REPO}public/samples/cmu-14_20.egoexo`;
 
-let browser;
-before(async () => {
-  browser = await launch();
-});
-after(async () => {
-  await browser?.close();
-});
+const browser = chromiumForFile();
 
 // Runs `egoexo args…`; resolves with its stdout's last line as JSON once it exits 0.
 async function egoexoJson(args) {
@@ -77,7 +71,7 @@ async function waitFor(app, predicate, what, timeout = 60_000) {
 
 describe('live capture', () => {
   test('a replayed session streams into the page, is drawn live, and is kept frame for frame', async () => {
-    const app = await openApp(browser, '?backend=webgl2');
+    const app = await openApp(browser(), '?backend=webgl2');
     assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
     await app.page.getByRole('button', { name: 'Go live' }).click();
     await app.page.waitForSelector('#live-room[data-code]');
@@ -120,7 +114,7 @@ describe('live capture', () => {
     await waitFor(app, (l) => l.frames > carriedOn + 10, 'frames after the malformed client');
 
     // A late viewer by the watch link draws at once (it receives the last 3.2 s).
-    const watcher = await openApp(browser, `?backend=webgl2${new URL(watchLink).hash}`);
+    const watcher = await openApp(browser(), `?backend=webgl2${new URL(watchLink).hash}`);
     await waitFor(watcher, (l) => l.frames >= 2, 'the late viewer drawing');
 
     const sent = await replay;
@@ -182,7 +176,7 @@ describe('live capture', () => {
     const dir = mkdtempSync(join(tmpdir(), 'egoexo-live-worlds-'));
     const walk = join(dir, 'wander.egoexo');
     execFileSync(EGOEXO, ['walk', '--seconds', '30', '--wander', '-o', walk], { stdio: ['ignore', 'ignore', 'inherit'] });
-    const app = await openApp(browser, '?backend=webgl2');
+    const app = await openApp(browser(), '?backend=webgl2');
     try {
       const code = await goLive(app);
       // Both observers stream in random worlds of their own (their hellos say so).
@@ -250,7 +244,7 @@ describe('live capture', () => {
     const pair = join(dir, 'pair.egoexo');
     // Two participants, each one's glasses streaming their keypoints of the other.
     execFileSync(EGOEXO, ['walk', '--seconds', '14', '--participants', '2', '--identities', '-o', pair], { stdio: ['ignore', 'ignore', 'inherit'] });
-    const app = await openApp(browser, '?backend=webgl2');
+    const app = await openApp(browser(), '?backend=webgl2');
     try {
       const code = await goLive(app);
       const replay = egoexoJson(['live', 'replay', pair, '--url', APP_URL, '--room', code, '--duration-s', '12']);

@@ -11,17 +11,11 @@ import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { after, before, describe, test } from 'node:test';
 
-import { APP_URL, launch, openApp } from './browser.mjs';
+import { APP_URL, chromiumForFile, openApp } from './browser.mjs';
 
 const REPO = new URL('../../', import.meta.url).pathname;
 
-let browser;
-before(async () => {
-  browser = await launch();
-});
-after(async () => {
-  await browser?.close();
-});
+const browser = chromiumForFile();
 
 // Joints of frame `frame` in the shown scene (metres, 24 × 3), and the shown frame.
 const shownJoints = (app, frame) => app.page.evaluate((f) => {
@@ -35,7 +29,7 @@ describe('a capture of several participants', () => {
     const file = join(dir, 'pair.egoexo');
     execFileSync(process.env.EGOEXO_BIN ?? 'egoexo', ['walk', '--seconds', '4', '--participants', '2', '--bystanders', '1', '-o', file],
       { stdio: ['ignore', 'ignore', 'inherit'] });
-    const app = await openApp(browser, '?backend=webgl2');
+    const app = await openApp(browser(), '?backend=webgl2');
     const sceneOf = (a) => a.page.evaluate(() => JSON.parse(new TextDecoder().decode(window.egoexo.scene)));
     try {
       assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
@@ -88,7 +82,7 @@ describe('a capture of several participants', () => {
       await page.waitForFunction(() => document.getElementById('share-link').value !== '', null, { timeout: 120_000 });
       const shared = await page.getByRole('textbox', { name: 'Share link' }).inputValue();
       await page.click('#share-close');
-      const other = await openApp(browser, `?backend=webgl2${shared.slice(shared.indexOf('#'))}`);
+      const other = await openApp(browser(), `?backend=webgl2${shared.slice(shared.indexOf('#'))}`);
       try {
         assert.equal(await other.waitState(['ready', 'error']), 'ready', await other.text('#error-message'));
         assert.equal(await other.page.getAttribute('[data-participant=participant-2]', 'aria-pressed'), 'true');
@@ -114,7 +108,7 @@ describe('a shared reconstruction', () => {
   const MOMENT_FRAME = 300; // 10 s at 30 fps
 
   before(async () => {
-    app = await openApp(browser, '?backend=webgl2');
+    app = await openApp(browser(), '?backend=webgl2');
     assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
     await app.page.click('#sample-button');
     assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
@@ -153,7 +147,7 @@ describe('a shared reconstruction', () => {
     await page.click('#share-close');
 
     const opened = Date.now();
-    const other = await openApp(browser, `?backend=webgl2${link.slice(link.indexOf('#'))}&t=10`);
+    const other = await openApp(browser(), `?backend=webgl2${link.slice(link.indexOf('#'))}&t=10`);
     try {
       assert.equal(await other.waitState(['ready', 'error']), 'ready', await other.text('#error-message'));
       const openMs = Date.now() - opened;
@@ -193,7 +187,7 @@ describe('a shared reconstruction', () => {
   });
 
   test('a range plays in a loop', async () => {
-    const other = await openApp(browser, `?backend=webgl2${link.slice(link.indexOf('#'))}&t=5-6`);
+    const other = await openApp(browser(), `?backend=webgl2${link.slice(link.indexOf('#'))}&t=5-6`);
     try {
       assert.equal(await other.waitState(['ready', 'error']), 'ready', await other.text('#error-message'));
       assert.equal(await other.page.evaluate(() => window.egoexo.viewer.is_playing()), true);
@@ -212,7 +206,7 @@ describe('a shared reconstruction', () => {
     // 16-byte key carries 2 bits only, so changing it may make a key that does not decode).
     const at = link.indexOf('.', link.indexOf('#share=')) + 1;
     const altered = `${link.slice(0, at)}${link[at] === 'A' ? 'B' : 'A'}${link.slice(at + 1)}`;
-    const other = await openApp(browser, `?backend=webgl2${altered.slice(altered.indexOf('#'))}`);
+    const other = await openApp(browser(), `?backend=webgl2${altered.slice(altered.indexOf('#'))}`);
     try {
       assert.equal(await other.waitState(['ready', 'error']), 'error');
       assert.equal(await other.text('#error-title'), 'Could not open the share');
@@ -231,7 +225,7 @@ describe('a shared reconstruction', () => {
     await entry.waitFor();
     await entry.getByRole('button', { name: /^Delete/ }).click();
     await page.waitForFunction(() => document.querySelectorAll('#shared-list li').length === 0);
-    const other = await openApp(browser, `?backend=webgl2${link.slice(link.indexOf('#'))}`);
+    const other = await openApp(browser(), `?backend=webgl2${link.slice(link.indexOf('#'))}`);
     try {
       assert.equal(await other.waitState(['ready', 'error']), 'error');
       assert.equal(await other.text('#error-title'), 'No such share');
@@ -251,7 +245,7 @@ describe('links to other things', () => {
       stdio: ['ignore', 'pipe', 'inherit'],
     }).trim();
     assert.match(link, /#share=/);
-    const app = await openApp(browser, `?backend=webgl2${link.slice(link.indexOf('#'))}`);
+    const app = await openApp(browser(), `?backend=webgl2${link.slice(link.indexOf('#'))}`);
     try {
       assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
       assert.equal(await app.text('#session-name'), '105_36');
@@ -263,7 +257,7 @@ describe('links to other things', () => {
   });
 
   test('#sample&t= opens the sample at that moment', async () => {
-    const app = await openApp(browser, '?backend=webgl2#sample&t=4');
+    const app = await openApp(browser(), '?backend=webgl2#sample&t=4');
     try {
       assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
       assert.equal(await app.page.evaluate(() => window.egoexo.viewer.frame()), 120);
@@ -276,14 +270,14 @@ describe('links to other things', () => {
     const samples = new URL('samples/samples.json', await assetBase());
     const list = await (await fetch(samples)).json();
     const url = new URL(list.samples[0].file, samples).href;
-    const app = await openApp(browser, `?backend=webgl2&url=${encodeURIComponent(url)}`);
+    const app = await openApp(browser(), `?backend=webgl2&url=${encodeURIComponent(url)}`);
     try {
       assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
       assert.match(await app.text('#session-name'), /\S/);
     } finally {
       await app.close();
     }
-    const broken = await openApp(browser, `?backend=webgl2&url=${encodeURIComponent('https://127.0.0.1:9/walk.egoexo')}`);
+    const broken = await openApp(browser(), `?backend=webgl2&url=${encodeURIComponent('https://127.0.0.1:9/walk.egoexo')}`);
     try {
       assert.equal(await broken.waitState(['ready', 'error']), 'error');
       assert.equal(await broken.text('#error-title'), 'Could not open the URL');
@@ -298,7 +292,7 @@ describe('links to other things', () => {
     const dir = mkdtempSync(join(tmpdir(), 'egoexo-e2e-'));
     const folder = join(dir, hostile);
     cpSync(join(REPO, 'crates/egoexo-session/tests/fixtures/aria_mps'), folder, { recursive: true });
-    const app = await openApp(browser, '?backend=webgl2');
+    const app = await openApp(browser(), '?backend=webgl2');
     try {
       await app.waitState('idle');
       await app.page.setInputFiles('#folder-input', folder);

@@ -13,7 +13,7 @@ import { after, before, describe, test } from 'node:test';
 import { metaQuest3 } from 'iwer';
 import { relaxedHandPose } from 'iwer/lib/device/configs/hand/relaxed.js';
 
-import { APP_URL, launch } from './browser.mjs';
+import { APP_URL, chromiumForFile } from './browser.mjs';
 
 const IWER_BUNDLE = readFileSync(
   join(dirname(createRequire(import.meta.url).resolve('iwer/package.json')), 'build', 'iwer.js'),
@@ -273,13 +273,7 @@ async function openXrPage(browser, fragment = '') {
   return { page, context, errors, waitState, close: () => context.close() };
 }
 
-let browser;
-before(async () => {
-  browser = await launch();
-});
-after(async () => {
-  await browser?.close();
-});
+const browser = chromiumForFile();
 
 describe('the WebXR page on an emulated Quest 3', () => {
   let room;
@@ -288,8 +282,8 @@ describe('the WebXR page on an emulated Quest 3', () => {
 
   before(async () => {
     room = await createRoom();
-    viewer = await joinAsViewer(browser, room);
-    xr = await openXrPage(browser, `#live=${room.room}.${room.device_secret}`);
+    viewer = await joinAsViewer(browser(), room);
+    xr = await openXrPage(browser(), `#live=${room.room}.${room.device_secret}`);
     assert.equal(await xr.waitState(['ready', 'error', 'unsupported']), 'ready', await xr.page.locator('body').innerText());
   });
   after(async () => {
@@ -484,8 +478,8 @@ describe('the WebXR page on an emulated Quest 3', () => {
 
 test('after a retryable close (the server restarting) the page reconnects and streams on', async () => {
   const room = await createRoom();
-  const viewer = await joinAsViewer(browser, room);
-  const xr = await openXrPage(browser, `#live=${room.room}.${room.device_secret}`);
+  const viewer = await joinAsViewer(browser(), room);
+  const xr = await openXrPage(browser(), `#live=${room.room}.${room.device_secret}`);
   try {
     // The page's sockets pass through the test, which can close one as a restarting server would.
     const sockets = [];
@@ -515,7 +509,7 @@ test('after a retryable close (the server restarting) the page reconnects and st
 describe('joining by code', () => {
   test('a typed device code (any case, with spaces) joins the room', async () => {
     const room = await createRoom();
-    const xr = await openXrPage(browser);
+    const xr = await openXrPage(browser());
     try {
       assert.equal(await xr.waitState(['ready', 'error']), 'ready');
       const typed = room.device_code.toLowerCase().replace('-', ' ');
@@ -535,7 +529,7 @@ describe('joining by code', () => {
     const room = await createRoom();
     // A code of the right form that opens no room (not this one's).
     const wrong = room.device_code === 'ZZZ-ZZZ' ? 'YYY-YYY' : 'ZZZ-ZZZ';
-    const xr = await openXrPage(browser);
+    const xr = await openXrPage(browser());
     try {
       assert.equal(await xr.waitState(['ready', 'error']), 'ready');
       await xr.page.getByLabel('Device code').fill(wrong);
@@ -552,7 +546,7 @@ describe('joining by code', () => {
   });
 
   test('a code that cannot be one is refused before anything connects', async () => {
-    const xr = await openXrPage(browser);
+    const xr = await openXrPage(browser());
     try {
       assert.equal(await xr.waitState(['ready', 'error']), 'ready');
       await xr.page.getByLabel('Device code').fill('7KQ-M40');
@@ -569,7 +563,7 @@ describe('joining by code', () => {
   });
 
   test('a damaged link says so', async () => {
-    const xr = await openXrPage(browser, '#live=abc');
+    const xr = await openXrPage(browser(), '#live=abc');
     try {
       assert.equal(await xr.waitState(['error', 'ready']), 'error');
       assert.match(await xr.page.getByRole('alert').innerText(), /link's #live=… part is damaged/);

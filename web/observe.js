@@ -177,8 +177,11 @@ class Observation {
     if (this.ended) return;
     this.nextFrame();
     this.captured.tick();
-    // When the camera's first frame came (Unix ms): what a test films from starts then.
-    document.body.dataset.firstFrameMs ??= String(performance.timeOrigin + now);
+    // When the camera's first frame was captured (Unix ms): what a test films from starts then.
+    // The first frame this page sees is a later one (the camera runs from when it was opened,
+    // while the page starts its detector), and its media time counts from the first.
+    document.body.dataset.firstFrameMs ??= String(performance.timeOrigin
+      + (metadata.captureTime ?? metadata.presentationTime ?? now) - 1000 * (metadata.mediaTime ?? 0));
     // One frame at a time in the detector: a frame that arrives while it is busy is skipped,
     // so what is sent is never stale.
     if (!this.workerReady || this.busy || !this.relay.open) return;

@@ -23,10 +23,13 @@ let viewerBrowser;
 let cameraBrowser;
 let film;
 before(async () => {
-  // 16 s of a wearer wandering before one tripod, filmed at 480 × 480 (a pinhole of the
-  // simulator's field of view, written beside the film).
+  // 24 s of a wearer wandering before one tripod, filmed at 480 × 480 (a pinhole of the
+  // simulator's field of view, written beside the film). Registration needs about 5 s of views
+  // on an idle machine; on a loaded one (CI runs two browser files at once) the page detects
+  // fewer frames a second and the replay joins later into the walk, and 16 s once left 9 s of
+  // views, too few.
   execFileSync(EGOEXO, [
-    'walk', '--seconds', '16', '--wander', '--observers', '1', '--static-cameras', '--video', '480',
+    'walk', '--seconds', '24', '--wander', '--observers', '1', '--static-cameras', '--video', '480',
     '--y4m', join(dir, 'cameras'), '-o', join(dir, 'walk.egoexo'), '--seed', '5',
   ], { stdio: ['ignore', 'ignore', 'inherit'] });
   const name = readdirSync(join(dir, 'cameras')).find((f) => f.endsWith('.y4m'));
@@ -111,8 +114,11 @@ describe('observer page', () => {
     t.diagnostic(JSON.stringify(registering.lastFrame.observer_worlds));
 
     // Registered from its views.
-    const registered = await waitFor('the camera registered', () => live(app), (l) => (l.lastFrame?.observer_worlds ?? []).some((o) => o.observer === 'tripod' && o.state === 'registered'), 90_000);
+    // Until the replay ends: after it, the wearer is gone and nothing more is learnt.
+    const registered = await waitFor('the camera registered or the replay ended', async () => ({ ...(await live(app)), replayEnded }),
+      (l) => l.replayEnded || (l.lastFrame?.observer_worlds ?? []).some((o) => o.observer === 'tripod' && o.state === 'registered'), 90_000);
     const world = registered.lastFrame.observer_worlds.find((o) => o.observer === 'tripod');
+    assert.equal(world.state, 'registered', `the replay ended before the camera was registered: ${JSON.stringify(world)}`);
     t.diagnostic(`registered after ${world.registered_after_s?.toFixed(1)} s of views: ${world.message}`);
     // Where it stands, then its rays fused: a known failure, kept visible as a TODO subtest
     // (reported, not counting against the suite) until it is fixed. In 6 runs on 2026-12-06 the

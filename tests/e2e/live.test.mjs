@@ -63,7 +63,7 @@ async function waitFor(app, predicate, what, timeout = 60_000) {
     const now = await live(app);
     if (predicate(now)) return now;
     if (Date.now() - start > timeout) {
-      throw new Error(`waiting for ${what}: ${JSON.stringify({ ...now, devices: now.devices?.length })} (errors: ${JSON.stringify(app.errors)})`);
+      throw new Error(`waiting for ${what}: ${JSON.stringify({ ...now, devices: now.devices?.map((d) => [d.device, d.connected, d.rates_hz]) })} (errors: ${JSON.stringify(app.errors)})`);
     }
     await new Promise((r) => setTimeout(r, 200));
   }
@@ -89,8 +89,11 @@ describe('live capture', () => {
     const later = await waitFor(app, (l) => l.frames >= early.frames + 45, 'more live frames');
     const moved = Math.hypot(...later.root.map((v, i) => v - early.root[i]));
     assert.ok(moved > 0.02, `the root moved ${moved} m`);
-    // Each device at a plausible rate (the sample's streams are 30 Hz).
-    const streaming = await waitFor(app, (l) => l.devices.length === 3 && l.devices.every((d) => d.rates_hz.length > 0), 'rates');
+    // Each device at a plausible rate (the sample's streams are 30 Hz). The observers drop out
+    // for 2 s at 4 s, which lowers their rate for a while after: on a loaded machine the first
+    // snapshot with every rate can fall there, so the rates are waited for, not taken at once.
+    const plausible = (d) => d.rates_hz.length > 0 && d.rates_hz.every(([, hz]) => hz > 15 && hz < 45);
+    const streaming = await waitFor(app, (l) => l.devices.length === 3 && l.devices.every(plausible), 'plausible rates');
     for (const device of streaming.devices) {
       for (const [stream, hz] of device.rates_hz) assert.ok(hz > 15 && hz < 45, `${device.device} ${stream} at ${hz} Hz`);
     }

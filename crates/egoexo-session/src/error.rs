@@ -69,6 +69,10 @@ pub enum ImportErrorKind {
     /// Syntactically invalid JSON.
     #[error("invalid JSON: {0}")]
     Json(String),
+    /// A manifest that does not have the format's shape: a missing field, a value of the wrong
+    /// type, an unknown variant (serde's words; the location names the field).
+    #[error("{0}")]
+    Manifest(String),
     /// A CSV row could not be read.
     #[error("invalid CSV: {0}")]
     Csv(String),

@@ -779,7 +779,7 @@ fn cases() -> Vec<Case> {
         Case {
             name: "a version 2 manifest called version 3 (a capture)",
             input: Egoexo(|f| edit_json(f, "session.json", |v| v["version"] = 3.into())),
-            expected: &["session.json, field `participants`: expected this field to be present"],
+            expected: &["session.json: missing field `participants`"],
         },
         Case {
             name: "version as a string",
@@ -818,7 +818,7 @@ fn cases() -> Vec<Case> {
             name: "changed conventions",
             input: Egoexo(|f| edit_json(f, "session.json", |v| v["conventions"]["world"] = "z_up".into())),
             expected: &[
-                "session.json, field `conventions`: expected {\"device_frame\":\"cpf\"",
+                "session.json, field `conventions`: expected {\"world\": \"y_up\", \"device_frame\": \"cpf\"",
                 "got an object with 4 fields",
             ],
         },
@@ -826,8 +826,38 @@ fn cases() -> Vec<Case> {
             name: "unknown camera model",
             input: Egoexo(|f| edit_json(f, "session.json", |v| v["observers"][1]["camera"]["model"] = "kb4".into())),
             expected: &[
-                "session.json, field `observers[1].camera.model`: expected \"fisheye624\" or \"pinhole\", got the string `kb4`",
+                "session.json, field `observers[1].camera.model`: unknown variant `kb4`, expected `fisheye624` or `pinhole`",
             ],
+        },
+        Case {
+            name: "a camera width that is not a number",
+            input: Egoexo(|f| edit_json(f, "session.json", |v| v["observers"][0]["camera"]["width"] = "wide".into())),
+            expected: &["session.json, field `observers[0].camera.width`: invalid type: string \"wide\", expected u32"],
+        },
+        Case {
+            name: "a pinhole camera with fisheye parameters",
+            input: Egoexo(|f| {
+                edit_json(f, "session.json", |v| v["observers"][0]["camera"]["model"] = "pinhole".into())
+            }),
+            expected: &[
+                "session.json, field `observers[0].camera.params`: expected an array of 4 numbers, got an array of 15 items",
+            ],
+        },
+        Case {
+            name: "a head joint beyond the f32 range",
+            input: Egoexo(|f| edit_json(f, "session.json", |v| v["wearer"]["head_joint_in_device"][1] = 1e300.into())),
+            expected: &[
+                "session.json, field `wearer.head_joint_in_device[1]`: expected a number within the f32 range, got 1e300",
+            ],
+        },
+        Case {
+            name: "a manifest without its wearer",
+            input: Egoexo(|f| {
+                edit_json(f, "session.json", |v| {
+                    v.as_object_mut().unwrap().remove("wearer");
+                })
+            }),
+            expected: &["session.json: missing field `wearer`"],
         },
         Case {
             name: "empty manifest",
@@ -1048,4 +1078,23 @@ fn the_unmodified_fixtures_import() {
     for f in [aria_fixture(), nymeria_fixture(), egoexo_files()] {
         import_session(&tree("ok", f), &ImportOptions::default()).unwrap();
     }
+}
+
+/// Keys the format does not know are read past, each a warning that names it by its path.
+#[test]
+fn keys_the_format_does_not_know_are_warnings_that_name_them() {
+    let mut f = egoexo_files();
+    edit_json(&mut f, "session.json", |v| {
+        v["extra"] = 1.into();
+        v["observers"][1]["camera"]["lens"] = "wide".into();
+        v["wearer"]["note"] = serde_json::json!({"written_by": "hand"});
+    });
+    let tree = FileTree::from_files("s.egoexo", f, Limits::default()).unwrap();
+    let (_, warnings) = egoexo_session::format::read_egoexo(&tree).unwrap();
+    let messages: Vec<String> = warnings.iter().map(ToString::to_string).collect();
+    for key in ["extra", "observers[1].camera.lens", "wearer.note"] {
+        let warned = format!("session.json: unknown field `{key}` ignored");
+        assert!(messages.iter().any(|m| m.contains(&warned)), "{warned}: {messages:#?}");
+    }
+    assert_eq!(messages.len(), 3, "{messages:#?}");
 }

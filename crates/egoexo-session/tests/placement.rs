@@ -117,7 +117,7 @@ fn placements_that_contradict_themselves_are_clear_errors() {
     });
     assert!(e.contains("`world: own`"), "a fixed camera without pose in the session world: {e}");
     let e = error_after(|m| m["observers"][1]["placement"] = json!({"world": "elsewhere"}));
-    assert!(e.contains("field `observers[1].placement`") && e.contains("unknown variant `elsewhere`"), "{e}");
+    assert!(e.contains("field `observers[1].placement.world`: unknown variant `elsewhere`"), "{e}");
 }
 
 /// The multi-device Aria folder with observer-2 a static camera (`static_camera.json`

@@ -225,7 +225,7 @@ proptest! {
         prop_assert_eq!(&imported.session, &s);
         let (from_folder, warnings) = read_egoexo(&support::tree("s", write_egoexo_files(&s).unwrap())).unwrap();
         prop_assert_eq!(&from_folder, &s);
-        // The writer writes only keys the reader knows (format/keys.rs).
+        // The writer writes only keys the reader knows (one typed manifest: format/manifest.rs).
         prop_assert!(!warnings.iter().any(|w| w.message.contains("unknown field")), "{:?}", warnings);
     }
 }

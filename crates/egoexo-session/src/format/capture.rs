@@ -5,16 +5,15 @@
 use std::collections::BTreeMap;
 
 use egoexo_core::glam::Vec3;
-use serde_json::{Value, json};
 
-use super::read::{ManifestReader, read_floor};
-use super::write::{self, DataFiles, camera_json, f32s, subject_json};
-use super::{CAPTURE_FORMAT_VERSION, WriteError, keys};
+use super::manifest::{self, CaptureManifest, ParticipantEntry, ViewEntry, from_wire, to_wire};
+use super::read::{ManifestReader, check_floor};
+use super::write::{self, DataFiles, camera_entry, subject_entry};
+use super::{CAPTURE_FORMAT_VERSION, FORMAT_NAME, WriteError};
 use crate::capture::{Capture, Participant, View, ViewPeople, spread_fixed_poses_in_capture};
 use crate::error::{ImportError, ImportWarning, Location};
-use crate::json::{JsonCtx, join};
+use crate::json::join;
 use crate::keypoints::{read_keypoints_jsonl, read_people_jsonl, write_people_jsonl};
-use crate::model::Trajectory;
 use crate::vfs::FileTree;
 
 /// Most participants a capture may hold.
@@ -32,56 +31,63 @@ pub fn write_capture_files(capture: &Capture) -> Result<BTreeMap<String, Vec<u8>
     let mut participants = Vec::new();
     for p in &capture.participants {
         let dir = format!("participants/{}", p.id);
-        let mut entry = json!({
-            "id": p.id,
-            "reconstruct": p.reconstruct,
-            "head_joint_in_device": f32s(&p.head_joint_in_device.to_array()),
-            "subject": subject_json(&p.subject),
+        let poses =
+            files.poses_and_placement(format!("{dir}/head/closed_loop_trajectory.csv"), &p.placement, &p.head, &dir)?;
+        participants.push(ParticipantEntry {
+            id: p.id.clone(),
+            reconstruct: p.reconstruct,
+            head: poses.trajectory,
+            left_wrist: files
+                .optional_trajectory(format!("{dir}/left_wrist/closed_loop_trajectory.csv"), p.left_wrist.as_ref()),
+            right_wrist: files
+                .optional_trajectory(format!("{dir}/right_wrist/closed_loop_trajectory.csv"), p.right_wrist.as_ref()),
+            wrist_source: (!p.wrist_source.is_devices()).then(|| p.wrist_source.clone()),
+            head_joint_in_device: to_wire(p.head_joint_in_device.to_array()),
+            camera: p.camera.as_ref().map(camera_entry),
+            video: p.video.as_ref().map(|video| files.video(&dir, video)),
+            context_features: p.context_features.as_ref().map(|f| files.context_features(&dir, f)).transpose()?,
+            subject: subject_entry(&p.subject),
+            ground_truth: p
+                .ground_truth
+                .as_ref()
+                .map(|gt| files.ground_truth(format!("{dir}/ground_truth.npz"), gt))
+                .transpose()?,
+            pose: poses.pose,
+            placement: poses.placement,
         });
-        let head = ("head", format!("{dir}/head/closed_loop_trajectory.csv"));
-        files.poses_and_placement(&mut entry, head, &p.placement, &p.head, &dir)?;
-        for (key, wrist) in [("left_wrist", &p.left_wrist), ("right_wrist", &p.right_wrist)] {
-            if let Some(wrist) = wrist {
-                entry[key] = files.trajectory(format!("{dir}/{key}/closed_loop_trajectory.csv"), wrist);
-            }
-        }
-        if !p.wrist_source.is_devices() {
-            entry["wrist_source"] = write::to_json(&p.wrist_source, &format!("{dir} wrist_source"))?;
-        }
-        if let Some(camera) = &p.camera {
-            entry["camera"] = camera_json(camera);
-        }
-        if let Some(video) = &p.video {
-            entry["video"] = files.video(&dir, video);
-        }
-        if let Some(features) = &p.context_features {
-            entry["context_features"] = files.context_features(&dir, features)?;
-        }
-        if let Some(gt) = &p.ground_truth {
-            entry["ground_truth"] = files.ground_truth(format!("{dir}/ground_truth.npz"), gt)?;
-        }
-        participants.push(entry);
     }
     let mut views = Vec::new();
     for view in &capture.views {
         let dir = format!("views/{}", view.observer);
+        let observer = view.observer.clone();
         views.push(match &view.people {
-            ViewPeople::Assigned { target, keypoints } => {
-                let path = files.keypoints(format!("{dir}/{target}.keypoints.jsonl"), &view.observer, keypoints);
-                json!({"observer": view.observer, "target": target, "keypoints": path})
-            }
+            ViewPeople::Assigned { target, keypoints } => ViewEntry {
+                observer,
+                target: Some(target.clone()),
+                keypoints: Some(files.keypoints(format!("{dir}/{target}.keypoints.jsonl"), &view.observer, keypoints)),
+                people: None,
+            },
             ViewPeople::Unassigned(people) => {
                 let bytes = write_people_jsonl(&view.observer, people).into_bytes();
-                json!({"observer": view.observer, "people": files.insert(format!("{dir}/people.jsonl"), bytes)})
+                ViewEntry {
+                    observer,
+                    target: None,
+                    keypoints: None,
+                    people: Some(files.insert(format!("{dir}/people.jsonl"), bytes)),
+                }
             }
         });
     }
-    let mut manifest = write::manifest_header(CAPTURE_FORMAT_VERSION, &capture.name);
-    manifest["participants"] = Value::Array(participants);
-    manifest["views"] = Value::Array(views);
-    if let Some(floor) = &capture.floor {
-        manifest["floor"] = write::to_json(floor, "floor")?;
-    }
+    let manifest = CaptureManifest {
+        format: FORMAT_NAME.into(),
+        version: CAPTURE_FORMAT_VERSION,
+        name: capture.name.clone(),
+        created_by: write::created_by(),
+        conventions: write::conventions(),
+        participants,
+        views,
+        floor: capture.floor.clone(),
+    };
     files.finish(&manifest)
 }
 
@@ -111,32 +117,30 @@ pub fn save_capture(
 pub(super) fn read_capture_manifest(
     root: &FileTree,
     manifest_file: &str,
-    doc: &Value,
+    doc: &serde_json::Value,
 ) -> Result<(Capture, Vec<ImportWarning>), ImportError> {
-    let ctx = JsonCtx::file(manifest_file);
-    let mut reader = ManifestReader { root, ctx, warnings: Vec::new() };
-    reader.known_keys(doc, "", keys::CAPTURE);
-    let name = ctx.str(ctx.field(doc, "", "name")?, "name")?.to_owned();
-    let participants_value = ctx.field(doc, "", "participants")?;
-    let items = ctx.array(participants_value, "participants")?;
-    if items.is_empty() || items.len() > MAX_PARTICIPANTS {
-        return Err(ctx.invalid("participants", format!("1 to {MAX_PARTICIPANTS} participants"), participants_value));
+    let mut reader = ManifestReader { root, file: manifest_file, warnings: Vec::new() };
+    let manifest: CaptureManifest = manifest::from_json(manifest_file, doc, &mut reader.warnings)?;
+    let count = manifest.participants.len();
+    if count == 0 || count > MAX_PARTICIPANTS {
+        return Err(reader.invalid(
+            "participants",
+            format!("1 to {MAX_PARTICIPANTS} participants"),
+            format!("an array of {count} items"),
+        ));
     }
-    let mut participants = Vec::with_capacity(items.len());
-    for (i, v) in items.iter().enumerate() {
-        participants.push(reader.participant(v, &format!("participants[{i}]"))?);
+    let mut participants = Vec::with_capacity(count);
+    for (i, entry) in manifest.participants.iter().enumerate() {
+        participants.push(reader.participant(entry, &format!("participants[{i}]"))?);
     }
-    let mut views = Vec::new();
-    if let Some(list) = ctx.optional(doc, "", "views")? {
-        for (i, v) in ctx.array(list, "views")?.iter().enumerate() {
-            views.push(reader.view(v, &format!("views[{i}]"))?);
-        }
+    let mut views = Vec::with_capacity(manifest.views.len());
+    for (i, entry) in manifest.views.iter().enumerate() {
+        views.push(reader.view(entry, &format!("views[{i}]"))?);
     }
-    let floor = match ctx.optional(doc, "", "floor")? {
-        Some(v) => Some(read_floor(&ctx, v)?),
-        None => None,
-    };
-    let mut capture = Capture { name, participants, views, floor };
+    if let Some(floor) = &manifest.floor {
+        check_floor(manifest_file, floor)?;
+    }
+    let mut capture = Capture { name: manifest.name, participants, views, floor: manifest.floor };
     spread_fixed_poses_in_capture(&mut capture);
     capture
         .validate()
@@ -146,75 +150,53 @@ pub(super) fn read_capture_manifest(
 
 impl ManifestReader<'_> {
     /// A participant of a capture (version 3).
-    fn participant(&mut self, v: &Value, path: &str) -> Result<Participant, ImportError> {
-        let ctx = self.ctx;
-        self.known_keys(v, path, keys::PARTICIPANT);
-        let id = self.id(v, path, "a participant")?;
-        let reconstruct_path = join(path, "reconstruct");
-        let reconstruct = ctx.field(v, path, "reconstruct")?;
-        let reconstruct =
-            reconstruct.as_bool().ok_or_else(|| ctx.invalid(&reconstruct_path, "true or false", reconstruct))?;
-        let (head, placement) = self.poses_and_placement(v, path, "head")?;
-        let wrist = |key: &str| -> Result<Option<Trajectory>, ImportError> {
-            ctx.optional(v, path, key)?.map(|w| self.trajectory(w, &join(path, key))).transpose()
-        };
-        let (left_wrist, right_wrist) = (wrist("left_wrist")?, wrist("right_wrist")?);
-        let head_joint_path = join(path, "head_joint_in_device");
-        let head_joint_in_device =
-            Vec3::from_array(ctx.f32_array::<3>(ctx.field(v, path, "head_joint_in_device")?, &head_joint_path)?);
-        let wrist_source = self.wrist_source(v, path)?;
-        let camera = match ctx.optional(v, path, "camera")? {
-            Some(c) => Some(self.camera(c, &join(path, "camera"))?),
-            None => None,
-        };
-        let video = match ctx.optional(v, path, "video")? {
-            Some(video) => Some(self.video(video, &join(path, "video"), &id)?),
-            None => None,
-        };
+    fn participant(&mut self, p: &ParticipantEntry, path: &str) -> Result<Participant, ImportError> {
+        let id = self.id(&p.id, &join(path, "id"), "a participant")?;
+        let (head, placement) =
+            self.poses_and_placement(path, ("head", p.head.as_ref()), p.pose.as_ref(), p.placement.as_ref())?;
+        let left_wrist = self.optional_trajectory(p.left_wrist.as_ref(), &join(path, "left_wrist"))?;
+        let right_wrist = self.optional_trajectory(p.right_wrist.as_ref(), &join(path, "right_wrist"))?;
+        let camera = p.camera.as_ref().map(|c| self.camera(c, &join(path, "camera"))).transpose()?;
+        let video = p.video.as_ref().map(|v| self.video(v, &join(path, "video"), &id)).transpose()?;
         if video.is_some() && camera.is_none() {
-            return Err(ctx.invalid(
+            return Err(self.invalid(
                 &join(path, "video"),
                 "a video only with the camera that filmed it (`camera`)",
-                &v["video"],
+                "a video without a camera",
             ));
         }
-        let context_features = self.context_features_at(v, path)?;
-        let subject = self.subject_at(ctx.field(v, path, "subject")?, &join(path, "subject"))?;
-        let ground_truth = match ctx.optional(v, path, "ground_truth")? {
-            Some(g) => Some(self.ground_truth(g, &join(path, "ground_truth"))?),
-            None => None,
-        };
         Ok(Participant {
-            id,
-            reconstruct,
+            reconstruct: p.reconstruct,
             head,
             left_wrist,
             right_wrist,
-            wrist_source,
-            head_joint_in_device,
+            wrist_source: p.wrist_source.clone().unwrap_or_default(),
+            head_joint_in_device: Vec3::from_array(from_wire(&p.head_joint_in_device)),
             camera,
             video,
-            context_features,
-            subject,
-            ground_truth,
+            context_features: self.context_features_at(p.context_features.as_ref(), &join(path, "context_features"))?,
+            subject: self.subject(&p.subject, &join(path, "subject"))?,
+            ground_truth: p
+                .ground_truth
+                .as_ref()
+                .map(|g| self.ground_truth(g, &join(path, "ground_truth")))
+                .transpose()?,
             placement,
+            id,
         })
     }
 
     /// A view of a capture (version 3): `{observer, target, keypoints}` or `{observer, people}`.
-    fn view(&mut self, v: &Value, path: &str) -> Result<View, ImportError> {
-        let ctx = self.ctx;
-        self.known_keys(v, path, keys::VIEW);
-        let observer = ctx.str(ctx.field(v, path, "observer")?, &join(path, "observer"))?.to_owned();
-        let people = match (ctx.optional(v, path, "target")?, ctx.optional(v, path, "people")?) {
-            (Some(target), None) => {
-                let target = ctx.str(target, &join(path, "target"))?.to_owned();
-                let file = self.data_path(ctx.field(v, path, "keypoints")?, &join(path, "keypoints"))?;
+    fn view(&mut self, v: &ViewEntry, path: &str) -> Result<View, ImportError> {
+        let observer = v.observer.clone();
+        let people = match (&v.target, &v.keypoints, &v.people) {
+            (Some(target), Some(keypoints), None) => {
+                let file = self.data_path(keypoints, &join(path, "keypoints"))?;
                 let keypoints =
                     read_keypoints_jsonl(&self.root.display_path(&file), &self.root.read_text(&file)?, &observer)?;
-                ViewPeople::Assigned { target, keypoints }
+                ViewPeople::Assigned { target: target.clone(), keypoints }
             }
-            (None, Some(people)) => {
+            (None, None, Some(people)) => {
                 let file = self.data_path(people, &join(path, "people"))?;
                 ViewPeople::Unassigned(read_people_jsonl(
                     &self.root.display_path(&file),
@@ -223,10 +205,18 @@ impl ManifestReader<'_> {
                 )?)
             }
             _ => {
-                return Err(ctx.invalid(
+                let named: Vec<&str> = [
+                    ("target", v.target.is_some()),
+                    ("keypoints", v.keypoints.is_some()),
+                    ("people", v.people.is_some()),
+                ]
+                .into_iter()
+                .filter_map(|(key, there)| there.then_some(key))
+                .collect();
+                return Err(self.invalid(
                     path,
                     "either `target` and `keypoints` (one participant's keypoints) or `people` (everyone, without identity)",
-                    v,
+                    if named.is_empty() { "none of them".to_owned() } else { format!("`{}`", named.join("`, `")) },
                 ));
             }
         };

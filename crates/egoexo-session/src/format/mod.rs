@@ -17,11 +17,12 @@
 //! `participants/<id>/…` and `views/<observer>/…` instead of `wearer/` and `observers/`
 //! ([`write_capture_files`], [`read_capture`]; every version reads as a capture).
 //!
-//! Modules: this one reads the manifest's header and dispatches on its version; `session`
-//! reads and writes versions 1–2 (one wearer), `capture` version 3; `keys` lists every
-//! object's keys (the reader warns about others, the writer writes no others — a test checks
-//! both against a written manifest); `read` and `write` hold the blocks every version shares
-//! (trajectories, cameras, placements, videos, context features, ground truth).
+//! Modules: this one reads the manifest's header and dispatches on its version; `manifest`
+//! holds one typed struct per version (their fields are the manifest's keys, in one place:
+//! the writer fills and serialises them, the reader deserialises them and warns about any
+//! other key); `session` reads and writes versions 1–2 (one wearer), `capture` version 3;
+//! `read` and `write` hold the entries every version shares (trajectories, cameras,
+//! placements, videos, context features, ground truth).
 //!
 //! Everything is in session conventions: Y-up world, metres, CPF head-device frames,
 //! nanoseconds on one clock. The manifest names every data file, so the layout above is what
@@ -35,7 +36,7 @@
 //! `ground_truth.occlusion_observers`). Quaternions are stored, not axis-angle, so a
 //! write → read round trip is exact.
 
-use serde_json::{Value, json};
+use serde_json::Value;
 use thiserror::Error;
 
 use crate::capture::{Capture, CaptureError, ViewPeople};
@@ -45,7 +46,7 @@ use crate::model::Session;
 use crate::vfs::FileTree;
 
 mod capture;
-mod keys;
+mod manifest;
 mod read;
 mod session;
 mod write;
@@ -76,10 +77,6 @@ pub const MIN_FORMAT_VERSION: u32 = 1;
 /// Largest accepted angle between a session trajectory's gravity and −Y, degrees (session
 /// worlds are Y-up by definition).
 pub const MAX_SESSION_GRAVITY_TILT_DEG: f32 = 1.0;
-/// The fixed `conventions` object (the same in every version).
-pub fn conventions_json() -> Value {
-    json!({"world": "y_up", "device_frame": "cpf", "time": "nanoseconds", "length": "metres"})
-}
 
 /// Why a session could not be written.
 #[derive(Debug, Error)]
@@ -128,8 +125,9 @@ fn read_manifest_header(root: &FileTree) -> Result<(String, Value, u64), ImportE
         None => return Err(unsupported(crate::json::describe(version))),
     };
     let conventions = ctx.field(&doc, "", "conventions")?;
-    if *conventions != conventions_json() {
-        return Err(ctx.invalid("conventions", conventions_json().to_string(), conventions));
+    let expected = manifest::Conventions::session();
+    if serde_json::from_value::<manifest::Conventions>(conventions.clone()).ok().as_ref() != Some(&expected) {
+        return Err(ctx.invalid("conventions", expected.to_string(), conventions));
     }
     Ok((manifest_file, doc, version))
 }

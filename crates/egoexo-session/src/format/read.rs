@@ -1,93 +1,92 @@
-//! The blocks every manifest version reads the same way: data paths, trajectories (gravity
-//! checked: session worlds are Y-up), subjects, cameras, transforms, placements, videos,
-//! context features, ground truth and the floor. Errors name the file and the field.
+//! The entries every manifest version reads the same way, from their typed form
+//! (`manifest.rs`) into the session model: data paths, trajectories (gravity checked: session
+//! worlds are Y-up), subjects, cameras, transforms, placements, videos, context features,
+//! ground truth and the floor. Errors name the file and the field.
 
 use egoexo_core::camera::{CameraCalibration, Fisheye624, Pinhole, Projection};
 use egoexo_core::glam::{Quat, Vec3};
 use egoexo_core::motion::SmplMotion;
 use egoexo_core::rigid::RigidTransform;
 use egoexo_core::skeleton::{NUM_BODY_JOINTS, NUM_JOINTS, SmplPose, SmplSkeleton};
-use serde_json::Value;
 
-use super::{MAX_SESSION_GRAVITY_TILT_DEG, keys};
-use crate::aria::trajectory::{Clock, read_closed_loop_trajectory};
-use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location};
-use crate::json::{JsonCtx, join};
-use crate::model::{
-    ContextFeatureTrack, Floor, GroundTruth, ObserverOcclusion, SubjectInfo, Trajectory, VideoRef, WristSource,
+use super::MAX_SESSION_GRAVITY_TILT_DEG;
+use super::manifest::{
+    CameraEntry, CameraModel, F32, GroundTruthEntry, SubjectEntry, TransformEntry, VideoEntry, from_wire,
 };
+use crate::aria::trajectory::{Clock, read_closed_loop_trajectory};
+use crate::error::{ImportError, ImportErrorKind, ImportWarning, Location, quote};
+use crate::json::join;
+use crate::model::{ContextFeatureTrack, Floor, GroundTruth, ObserverOcclusion, SubjectInfo, Trajectory, VideoRef};
 use crate::npz::{NpyArray, NpyData, Npz};
 use crate::placement::{Mount, Placement, WorldRef};
 use crate::vfs::{FileTree, normalize_path};
 
-/// The `floor` object.
-pub(super) fn read_floor(ctx: &JsonCtx<'_>, v: &Value) -> Result<Floor, ImportError> {
-    let floor: Floor = serde_json::from_value(v.clone()).map_err(|e| {
-        ctx.invalid(
-            "floor",
-            format!("{{\"height_m\": metres, \"source\": {{\"kind\": \"semidense_points\" | \"standing_head\" | \"ground_truth\", …}}}} ({e})"),
-            v,
-        )
-    })?;
+/// The `floor` object's height: finite, within ±10 km.
+pub(super) fn check_floor(file: &str, floor: &Floor) -> Result<(), ImportError> {
     if !(floor.height_m.is_finite() && floor.height_m.abs() <= 10_000.0) {
-        return Err(ctx.invalid("floor.height_m", "a finite height within ±10000 m", &v["height_m"]));
+        return Err(ImportError::invalid(
+            file,
+            Location::Field("floor.height_m".into()),
+            "a finite height within ±10000 m",
+            floor.height_m.to_string(),
+        ));
     }
-    Ok(floor)
+    Ok(())
 }
 
-/// Reads a manifest's objects, collecting warnings (unknown keys, a video outside the
-/// session); each version's module adds the objects of its own (`session.rs`, `capture.rs`).
+/// Turns a typed manifest's entries into the session model, checking what their types cannot
+/// say (safe paths that exist, ids, unit quaternions, parameter counts, ranges) and reading
+/// the data files they name; collects warnings (unknown keys, a video outside the session).
+/// Each version's module adds the entries of its own (`session.rs`, `capture.rs`).
 pub(super) struct ManifestReader<'a> {
     pub(super) root: &'a FileTree,
-    pub(super) ctx: JsonCtx<'a>,
+    /// The manifest's file, as errors name it.
+    pub(super) file: &'a str,
     pub(super) warnings: Vec<ImportWarning>,
 }
 
 impl ManifestReader<'_> {
-    pub(super) fn known_keys(&mut self, v: &Value, path: &str, known: &[&str]) {
-        if let Value::Object(map) = v {
-            for key in map.keys().filter(|k| !known.contains(&k.as_str())) {
-                self.warnings.push(ImportWarning {
-                    file: self.ctx.file.to_owned(),
-                    message: format!("unknown field `{}` ignored", join(path, key)),
-                });
-            }
-        }
+    /// An error at `path` (a field of the manifest): `expected`, `got`.
+    pub(super) fn invalid(&self, path: &str, expected: impl Into<String>, got: impl Into<String>) -> ImportError {
+        let location = if path.is_empty() { Location::File } else { Location::Field(path.to_owned()) };
+        ImportError::invalid(self.file, location, expected, got)
     }
 
-    /// The `id` of the object at `path` (an observer's or a participant's, `what`): 1–64
-    /// characters from A–Z, a–z, 0–9, `.`, `_`, `-`.
-    pub(super) fn id(&self, v: &Value, path: &str, what: &str) -> Result<String, ImportError> {
-        let ctx = self.ctx;
-        let id_path = join(path, "id");
-        let value = ctx.field(v, path, "id")?;
-        let id = ctx.str(value, &id_path)?;
+    /// `id` at `path` (an observer's or a participant's, `what`): 1–64 characters from A–Z,
+    /// a–z, 0–9, `.`, `_`, `-`.
+    pub(super) fn id(&self, id: &str, path: &str, what: &str) -> Result<String, ImportError> {
         if !crate::validate::is_valid_observer_id(id) {
-            return Err(ctx.invalid(
-                &id_path,
+            return Err(self.invalid(
+                path,
                 format!("{what} id of 1–64 characters from A–Z, a–z, 0–9, `.`, `_`, `-`"),
-                value,
+                format!("the string {}", quote(id, 40)),
             ));
         }
         Ok(id.to_owned())
     }
 
-    /// A data file named by the manifest: a safe relative path that exists.
-    pub(super) fn data_path(&self, v: &Value, path: &str) -> Result<String, ImportError> {
-        let raw = self.ctx.str(v, path)?;
-        let normalized = normalize_path(raw)
-            .ok_or_else(|| self.ctx.error(path, ImportErrorKind::UnsafePath { path: raw.to_owned() }))?;
+    /// A data file named by the manifest at `path`: a safe relative path that exists.
+    pub(super) fn data_path(&self, raw: &str, path: &str) -> Result<String, ImportError> {
+        let normalized = normalize_path(raw).ok_or_else(|| {
+            ImportError::new(
+                self.file,
+                Location::Field(path.to_owned()),
+                ImportErrorKind::UnsafePath { path: raw.to_owned() },
+            )
+        })?;
         if !self.root.contains(&normalized) {
             return Err(ImportError::missing_file(
                 self.root.display_path(&normalized),
-                format!("the file named by {} field `{path}`", self.ctx.file),
+                format!("the file named by {} field `{path}`", self.file),
             ));
         }
         Ok(normalized)
     }
 
-    pub(super) fn trajectory(&self, v: &Value, path: &str) -> Result<Trajectory, ImportError> {
-        let file = self.data_path(v, path)?;
+    /// The trajectory file at `raw` (manifest field `path`), its gravity checked: session
+    /// worlds are Y-up.
+    pub(super) fn trajectory(&self, raw: &str, path: &str) -> Result<Trajectory, ImportError> {
+        let file = self.data_path(raw, path)?;
         let display = self.root.display_path(&file);
         let t = read_closed_loop_trajectory(&display, self.root.open_reader(&file)?, Clock::Device, &mut |_| {})?;
         let g = t.gravity_world;
@@ -102,98 +101,93 @@ impl ManifestReader<'_> {
         Ok(Trajectory { timestamps_ns: t.timestamps_ns, poses: t.poses })
     }
 
-    pub(super) fn subject_at(&mut self, v: &Value, path: &str) -> Result<SubjectInfo, ImportError> {
-        let ctx = self.ctx;
-        self.known_keys(v, path, keys::SUBJECT);
+    /// An optional trajectory file (a wrist).
+    pub(super) fn optional_trajectory(
+        &self,
+        raw: Option<&String>,
+        path: &str,
+    ) -> Result<Option<Trajectory>, ImportError> {
+        raw.map(|raw| self.trajectory(raw, path)).transpose()
+    }
+
+    pub(super) fn subject(&self, subject: &SubjectEntry, path: &str) -> Result<SubjectInfo, ImportError> {
         let field = |key: &str| join(path, key);
-        let height_m = ctx.optional(v, path, "height_m")?.map(|h| ctx.f32(h, &field("height_m"))).transpose()?;
-        let betas = match ctx.optional(v, path, "betas")? {
-            Some(b) => {
-                let items = ctx.array(b, &field("betas"))?;
-                if items.is_empty() || items.len() > 300 {
-                    return Err(ctx.invalid(&field("betas"), "1 to 300 SMPL shape coefficients", b));
-                }
-                Some(
-                    items
-                        .iter()
-                        .enumerate()
-                        .map(|(i, x)| ctx.f32(x, &format!("{path}.betas[{i}]")))
-                        .collect::<Result<_, _>>()?,
-                )
+        let betas = match &subject.betas {
+            Some(b) if b.is_empty() || b.len() > 300 => {
+                return Err(self.invalid(
+                    &field("betas"),
+                    "1 to 300 SMPL shape coefficients",
+                    format!("an array of {} items", b.len()),
+                ));
             }
+            Some(b) => Some(b.iter().map(|x| x.0).collect()),
             None => None,
         };
-        let rest_joints = match ctx.optional(v, path, "rest_joints")? {
+        let rest_joints = match &subject.rest_joints {
+            Some(j) if j.len() != NUM_JOINTS => {
+                return Err(self.invalid(
+                    &field("rest_joints"),
+                    format!("{NUM_JOINTS} joints [x, y, z]"),
+                    format!("an array of {} items", j.len()),
+                ));
+            }
             Some(j) => {
-                let items = ctx.array(j, &field("rest_joints"))?;
-                if items.len() != NUM_JOINTS {
-                    return Err(ctx.invalid(&field("rest_joints"), format!("{NUM_JOINTS} joints [x, y, z]"), j));
-                }
                 let mut joints = [Vec3::ZERO; NUM_JOINTS];
-                for (i, (slot, item)) in joints.iter_mut().zip(items).enumerate() {
-                    *slot = Vec3::from_array(ctx.f32_array::<3>(item, &format!("{path}.rest_joints[{i}]"))?);
+                for (slot, p) in joints.iter_mut().zip(j) {
+                    *slot = Vec3::from_array(from_wire(p));
                 }
                 Some(joints)
             }
             None => None,
         };
-        Ok(SubjectInfo { height_m, betas, rest_joints })
+        Ok(SubjectInfo { height_m: subject.height_m.map(|h| h.0), betas, rest_joints })
     }
 
-    /// A device's poses and placement: `trajectory_key` (a worn device's trajectory file), or
-    /// `pose` (a static camera), or neither with `placement.mount: fixed` and `world: own` (a
-    /// static camera to register). A static camera's trajectory holds its pose once here;
-    /// [`spread_fixed_poses`] spans it over the recording once everything is read.
+    /// A device's poses and placement: a worn device's trajectory (`trajectory`, under
+    /// `trajectory_key`), or `pose` (a static camera), or neither with `placement.mount: fixed`
+    /// and `world: own` (a static camera to register). A static camera's trajectory holds its
+    /// pose once here; [`spread_fixed_poses`] spans it over the recording once everything is
+    /// read.
+    ///
+    /// [`spread_fixed_poses`]: crate::capture::spread_fixed_poses
     pub(super) fn poses_and_placement(
-        &mut self,
-        v: &Value,
+        &self,
         path: &str,
-        trajectory_key: &str,
+        (trajectory_key, trajectory): (&str, Option<&String>),
+        pose: Option<&TransformEntry>,
+        placement: Option<&Placement>,
     ) -> Result<(Trajectory, Placement), ImportError> {
-        let ctx = self.ctx;
         let placement_path = join(path, "placement");
-        let placement: Option<Placement> = match ctx.optional(v, path, "placement")? {
-            Some(p) => Some(serde_json::from_value(p.clone()).map_err(|e| {
-                ctx.invalid(
-                    &placement_path,
-                    format!("a placement {{world, gravity, clock, mount, focal_known, registration}} ({e})"),
-                    p,
-                )
-            })?),
-            None => None,
-        };
-        let trajectory = ctx.optional(v, path, trajectory_key)?;
-        let pose = ctx.optional(v, path, "pose")?;
-        let fixed = placement.as_ref().is_some_and(|p| p.mount == Mount::Fixed);
+        let fixed = placement.is_some_and(|p| p.mount == Mount::Fixed);
         match (trajectory, pose) {
-            (Some(_), Some(p)) => Err(ctx.invalid(
+            (Some(_), Some(_)) => Err(self.invalid(
                 &join(path, "pose"),
                 format!("either `{trajectory_key}` (a worn device) or `pose` (a static camera), not both"),
-                p,
+                "both",
             )),
             (Some(t), None) => {
                 if fixed {
-                    return Err(ctx.invalid(
+                    return Err(self.invalid(
                         &join(&placement_path, "mount"),
                         format!("`worn` for a device with a `{trajectory_key}` (a static camera has `pose`)"),
-                        &v["placement"]["mount"],
+                        "the string `fixed`",
                     ));
                 }
                 let trajectory = self.trajectory(t, &join(path, trajectory_key))?;
-                Ok((trajectory, placement.unwrap_or_default()))
+                Ok((trajectory, placement.cloned().unwrap_or_default()))
             }
             (None, Some(p)) => {
                 let pose = self.transform(p, &join(path, "pose"))?;
-                let placement = Placement { mount: Mount::Fixed, ..placement.unwrap_or_default() };
+                let placement = Placement { mount: Mount::Fixed, ..placement.cloned().unwrap_or_default() };
                 Ok((Trajectory { timestamps_ns: vec![0], poses: vec![pose] }, placement))
             }
             (None, None) => match placement {
-                Some(placement) if fixed && placement.world == WorldRef::Own => {
-                    Ok((Trajectory { timestamps_ns: vec![0], poses: vec![RigidTransform::IDENTITY] }, placement))
-                }
-                _ => Err(ImportError::invalid(
-                    ctx.file,
-                    Location::Field(join(path, trajectory_key)),
+                Some(placement) if fixed && placement.world == WorldRef::Own => Ok((
+                    Trajectory { timestamps_ns: vec![0], poses: vec![RigidTransform::IDENTITY] },
+                    placement.clone(),
+                )),
+                _ => Err(self.invalid(
+                    &join(path, trajectory_key),
                     format!(
                         "`{trajectory_key}` (a worn device), `pose` (a static camera), or `placement` with \
                          `mount: fixed` and `world: own` (a static camera to register)"
@@ -204,87 +198,91 @@ impl ManifestReader<'_> {
         }
     }
 
-    fn transform(&self, v: &Value, path: &str) -> Result<RigidTransform, ImportError> {
-        let ctx = self.ctx;
-        let t = ctx.f32_array::<3>(ctx.field(v, path, "translation")?, &join(path, "translation"))?;
-        let q_path = join(path, "rotation_xyzw");
-        let q = ctx.f32_array::<4>(ctx.field(v, path, "rotation_xyzw")?, &q_path)?;
-        let q = Quat::from_array(q);
+    /// `T_a_b` at `path`, its rotation a unit quaternion.
+    fn transform(&self, t: &TransformEntry, path: &str) -> Result<RigidTransform, ImportError> {
+        let q = Quat::from_array(from_wire(&t.rotation_xyzw));
         let norm = f64::from(q.length());
         if (norm - 1.0).abs() > crate::aria::trajectory::QUATERNION_NORM_TOLERANCE {
-            return Err(ctx.error(
-                &q_path,
+            return Err(ImportError::new(
+                self.file,
+                Location::Field(join(path, "rotation_xyzw")),
                 ImportErrorKind::NonUnitQuaternion {
                     norm,
                     tolerance: crate::aria::trajectory::QUATERNION_NORM_TOLERANCE,
                 },
             ));
         }
-        Ok(RigidTransform { rotation: unit(q), translation: Vec3::from_array(t) })
+        Ok(RigidTransform { rotation: unit(q), translation: Vec3::from_array(from_wire(&t.translation)) })
     }
 
-    pub(super) fn camera(&mut self, v: &Value, path: &str) -> Result<CameraCalibration, ImportError> {
-        let ctx = self.ctx;
-        self.known_keys(v, path, keys::CAMERA);
-        let model_path = join(path, "model");
-        let model = ctx.field(v, path, "model")?;
+    pub(super) fn camera(&self, c: &CameraEntry, path: &str) -> Result<CameraCalibration, ImportError> {
         let params_path = join(path, "params");
-        let params = ctx.field(v, path, "params")?;
-        let bad = |e: egoexo_core::camera::CameraError| {
-            ImportError::invalid(ctx.file, ctx.at(&params_path), "valid camera parameters", e.to_string())
+        let bad =
+            |e: egoexo_core::camera::CameraError| self.invalid(&params_path, "valid camera parameters", e.to_string());
+        let params: Vec<f32> = c.params.iter().map(|x| x.0).collect();
+        let count = |n: usize| {
+            self.invalid(
+                &params_path,
+                format!("an array of {n} numbers"),
+                format!("an array of {} items", params.len()),
+            )
         };
-        let projection = match model.as_str() {
-            Some("fisheye624") => {
-                Projection::Fisheye624(Fisheye624::new(ctx.f32_array::<15>(params, &params_path)?).map_err(bad)?)
+        let projection = match c.model {
+            CameraModel::Fisheye624 => {
+                let params: [f32; 15] = params.as_slice().try_into().map_err(|_| count(15))?;
+                Projection::Fisheye624(Fisheye624::new(params).map_err(bad)?)
             }
-            Some("pinhole") => {
-                let [fx, fy, cx, cy] = ctx.f32_array::<4>(params, &params_path)?;
+            CameraModel::Pinhole => {
+                let [fx, fy, cx, cy]: [f32; 4] = params.as_slice().try_into().map_err(|_| count(4))?;
                 Projection::Pinhole(Pinhole::new(fx, fy, cx, cy).map_err(bad)?)
             }
-            _ => return Err(ctx.invalid(&model_path, "\"fisheye624\" or \"pinhole\"", model)),
         };
-        let side = |key: &str| -> Result<u32, ImportError> {
-            let p = join(path, key);
-            let value = ctx.field(v, path, key)?;
-            match value.as_u64() {
-                Some(s) if (1..=crate::aria::calibration::MAX_IMAGE_SIDE_PX).contains(&s) => Ok(s as u32),
-                _ => Err(ctx.invalid(
-                    &p,
-                    format!("an image side of 1..={} pixels", crate::aria::calibration::MAX_IMAGE_SIDE_PX),
-                    value,
-                )),
+        let max = crate::aria::calibration::MAX_IMAGE_SIDE_PX;
+        for (key, side) in [("width", c.width), ("height", c.height)] {
+            if !(1..=max).contains(&u64::from(side)) {
+                return Err(self.invalid(
+                    &join(path, key),
+                    format!("an image side of 1..={max} pixels"),
+                    format!("the number {side}"),
+                ));
             }
-        };
-        let (width, height) = (side("width")?, side("height")?);
-        let t_device_camera = self.transform(ctx.field(v, path, "t_device_camera")?, &join(path, "t_device_camera"))?;
-        let mut camera = CameraCalibration::new(projection, width, height, t_device_camera)
-            .map_err(|e| ImportError::invalid(ctx.file, ctx.at(path), "a valid camera", e.to_string()))?;
-        if let Some(r) = ctx.optional(v, path, "valid_radius_px")? {
-            let radius = ctx.f32(r, &join(path, "valid_radius_px"))?;
+        }
+        let t_device_camera = self.transform(&c.t_device_camera, &join(path, "t_device_camera"))?;
+        let mut camera = CameraCalibration::new(projection, c.width, c.height, t_device_camera)
+            .map_err(|e| self.invalid(path, "a valid camera", e.to_string()))?;
+        if let Some(F32(radius)) = c.valid_radius_px {
             if radius <= 0.0 {
-                return Err(ctx.invalid(&join(path, "valid_radius_px"), "a positive radius in pixels", r));
+                return Err(self.invalid(
+                    &join(path, "valid_radius_px"),
+                    "a positive radius in pixels",
+                    format!("the number {radius}"),
+                ));
             }
             camera = camera.with_valid_radius(radius);
         }
         Ok(camera)
     }
 
-    /// An RGB video reference `{path, start_ns, timestamps?}` of `owner`'s camera.
-    pub(super) fn video(&mut self, video: &Value, vpath: &str, owner: &str) -> Result<VideoRef, ImportError> {
-        let ctx = self.ctx;
-        let raw = ctx.str(ctx.field(video, vpath, "path")?, &join(vpath, "path"))?;
-        let normalized = normalize_path(raw)
-            .ok_or_else(|| ctx.error(&join(vpath, "path"), ImportErrorKind::UnsafePath { path: raw.to_owned() }))?;
+    /// An RGB video of `owner`'s camera at manifest field `path`; a video outside the session
+    /// is a warning (it may be given beside it).
+    pub(super) fn video(&mut self, video: &VideoEntry, path: &str, owner: &str) -> Result<VideoRef, ImportError> {
+        let path_field = join(path, "path");
+        let normalized = normalize_path(&video.path).ok_or_else(|| {
+            ImportError::new(
+                self.file,
+                Location::Field(path_field),
+                ImportErrorKind::UnsafePath { path: video.path.clone() },
+            )
+        })?;
         if !self.root.contains(&normalized) {
             self.warnings.push(ImportWarning {
                 file: self.root.display_path(&normalized),
                 message: format!("the video of `{owner}` is not inside the session"),
             });
         }
-        let start_ns = ctx.i64(ctx.field(video, vpath, "start_ns")?, &join(vpath, "start_ns"))?;
-        let frame_times_ns = match ctx.optional(video, vpath, "timestamps")? {
+        let frame_times_ns = match &video.timestamps {
             Some(t) => {
-                let file = self.data_path(t, &join(vpath, "timestamps"))?;
+                let file = self.data_path(t, &join(path, "timestamps"))?;
                 crate::video::read_frame_timestamps(
                     &self.root.display_path(&file),
                     &self.root.read(&file)?,
@@ -293,33 +291,19 @@ impl ManifestReader<'_> {
             }
             None => Vec::new(),
         };
-        Ok(VideoRef { path: normalized, start_ns, frame_times_ns })
+        Ok(VideoRef { path: normalized, start_ns: video.start_ns, frame_times_ns })
     }
 
-    /// `wrist_source` at `path` (`devices` where absent).
-    pub(super) fn wrist_source(&self, v: &Value, parent: &str) -> Result<WristSource, ImportError> {
-        let ctx = self.ctx;
-        Ok(match ctx.optional(v, parent, "wrist_source")? {
-            Some(w) => serde_json::from_value(w.clone()).map_err(|e| {
-                ctx.invalid(
-                    &join(parent, "wrist_source"),
-                    format!("{{\"kind\": \"devices\"}} or {{\"kind\": \"hand_tracking\", \"file\", \"form\", \"orientation\"}} ({e})"),
-                    w,
-                )
-            })?,
-            None => WristSource::Devices,
-        })
-    }
-
-    /// The context features a manifest names at `path` (`timestamps_ns` (N,), `values` (N, D)).
+    /// The context features file at manifest field `path` (`timestamps_ns` (N,), `values`
+    /// (N, D)).
     pub(super) fn context_features_at(
         &self,
-        v: &Value,
-        parent: &str,
+        raw: Option<&String>,
+        path: &str,
     ) -> Result<Option<ContextFeatureTrack>, ImportError> {
-        match self.ctx.optional(v, parent, "context_features")? {
-            Some(f) => {
-                let file = self.data_path(f, &join(parent, "context_features"))?;
+        match raw {
+            Some(raw) => {
+                let file = self.data_path(raw, path)?;
                 Ok(Some(self.context_features(&file)?))
             }
             None => Ok(None),
@@ -338,10 +322,10 @@ impl ManifestReader<'_> {
         Ok(ContextFeatureTrack { timestamps_ns, dim, values })
     }
 
-    pub(super) fn ground_truth(&mut self, v: &Value, path: &str) -> Result<GroundTruth, ImportError> {
-        let ctx = self.ctx;
-        self.known_keys(v, path, keys::GROUND_TRUTH);
-        let file = self.data_path(ctx.field(v, path, "motion")?, &join(path, "motion"))?;
+    /// Ground truth: the motion's npz (the arrays of the module docs of `format`) and its
+    /// occlusion masks, one row per observer named.
+    pub(super) fn ground_truth(&self, gt: &GroundTruthEntry, path: &str) -> Result<GroundTruth, ImportError> {
+        let file = self.data_path(&gt.motion, &join(path, "motion"))?;
         let display = self.root.display_path(&file);
         let npz = Npz::open(&display, self.root.read(&file)?.into_owned(), self.root.limits())?;
         let scalar = |name: &str| npz.array_with_shape(name, &[Some(1)]);
@@ -399,12 +383,10 @@ impl ManifestReader<'_> {
         let motion = SmplMotion::new(fps, start_ns, skeleton, betas, poses)
             .map_err(|e| ImportError::invalid(&display, Location::File, "a valid SMPL motion", e.to_string()))?;
         let mut occlusion = Vec::new();
-        if let Some(ids) = ctx.optional(v, path, "occlusion_observers")? {
-            let ids_path = join(path, "occlusion_observers");
-            let ids = ctx.array(ids, &ids_path)?;
+        if let Some(ids) = &gt.occlusion_observers {
             let masks = ints(&display, "occluded", npz.array_with_shape("occluded", &[Some(ids.len()), Some(n)])?)?;
             for (o, id) in ids.iter().enumerate() {
-                let observer_id = ctx.str(id, &format!("{ids_path}[{o}]"))?.to_owned();
+                let observer_id = id.clone();
                 let mut occluded = Vec::with_capacity(n);
                 for (i, &m) in masks[o * n..(o + 1) * n].iter().enumerate() {
                     occluded.push(u16::try_from(m).map_err(|_| {

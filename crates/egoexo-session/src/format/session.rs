@@ -6,11 +6,11 @@ use std::collections::BTreeMap;
 
 use egoexo_core::camera::CameraCalibration;
 use egoexo_core::glam::Vec3;
-use serde_json::{Value, json};
 
-use super::read::{ManifestReader, read_floor};
-use super::write::{self, DataFiles, camera_json, f32s, subject_json};
-use super::{FORMAT_VERSION, WriteError, keys};
+use super::manifest::{self, ObserverEntry, SessionManifest, StaticCameraFile, WearerEntry, from_wire, to_wire};
+use super::read::{ManifestReader, check_floor};
+use super::write::{self, DataFiles, camera_entry, subject_entry};
+use super::{FORMAT_NAME, FORMAT_VERSION, WriteError};
 use crate::capture::spread_fixed_poses;
 use crate::error::{ImportError, ImportWarning, Location};
 use crate::json::{JsonCtx, join};
@@ -24,45 +24,56 @@ pub fn write_egoexo_files(session: &Session) -> Result<BTreeMap<String, Vec<u8>>
     crate::validate::validate_session(session)?;
     let mut files = DataFiles::default();
     let w = &session.wearer;
-    let mut wearer = json!({
-        "head": files.trajectory("wearer/head/closed_loop_trajectory.csv".into(), &w.head),
-        "head_joint_in_device": f32s(&w.head_joint_in_device.to_array()),
-    });
-    if !w.wrist_source.is_devices() {
-        wearer["wrist_source"] = write::to_json(&w.wrist_source, "wearer.wrist_source")?;
-    }
-    for (key, wrist) in [("left_wrist", &w.left_wrist), ("right_wrist", &w.right_wrist)] {
-        if let Some(wrist) = wrist {
-            wearer[key] = files.trajectory(format!("wearer/{key}/closed_loop_trajectory.csv"), wrist);
-        }
-    }
+    let wearer = WearerEntry {
+        head: files.trajectory("wearer/head/closed_loop_trajectory.csv".into(), &w.head),
+        left_wrist: files
+            .optional_trajectory("wearer/left_wrist/closed_loop_trajectory.csv".into(), w.left_wrist.as_ref()),
+        right_wrist: files
+            .optional_trajectory("wearer/right_wrist/closed_loop_trajectory.csv".into(), w.right_wrist.as_ref()),
+        head_joint_in_device: to_wire(w.head_joint_in_device.to_array()),
+        wrist_source: (!w.wrist_source.is_devices()).then(|| w.wrist_source.clone()),
+    };
     let mut observers = Vec::new();
     for observer in &session.observers {
         let dir = format!("observers/{}", observer.id);
-        let mut entry = json!({"id": observer.id, "camera": camera_json(&observer.camera)});
-        let trajectory = ("trajectory", format!("{dir}/closed_loop_trajectory.csv"));
-        files.poses_and_placement(&mut entry, trajectory, &observer.placement, &observer.head, &dir)?;
-        if let Some(kp) = &observer.keypoints {
-            entry["keypoints"] = files.keypoints(format!("{dir}/keypoints.jsonl"), &observer.id, kp);
-        }
-        if let Some(video) = &observer.video {
-            entry["video"] = files.video(&dir, video);
-        }
-        if let Some(features) = &observer.context_features {
-            entry["context_features"] = files.context_features(&dir, features)?;
-        }
-        observers.push(entry);
+        let poses = files.poses_and_placement(
+            format!("{dir}/closed_loop_trajectory.csv"),
+            &observer.placement,
+            &observer.head,
+            &dir,
+        )?;
+        observers.push(ObserverEntry {
+            id: observer.id.clone(),
+            trajectory: poses.trajectory,
+            pose: poses.pose,
+            placement: poses.placement,
+            camera: camera_entry(&observer.camera),
+            keypoints: observer
+                .keypoints
+                .as_ref()
+                .map(|kp| files.keypoints(format!("{dir}/keypoints.jsonl"), &observer.id, kp)),
+            video: observer.video.as_ref().map(|video| files.video(&dir, video)),
+            context_features: observer
+                .context_features
+                .as_ref()
+                .map(|f| files.context_features(&dir, f))
+                .transpose()?,
+        });
     }
-    let mut manifest = write::manifest_header(FORMAT_VERSION, &session.name);
-    manifest["subject"] = subject_json(&session.subject);
-    manifest["wearer"] = wearer;
-    manifest["observers"] = Value::Array(observers);
-    if let Some(floor) = &session.floor {
-        manifest["floor"] = write::to_json(floor, "floor")?;
-    }
-    if let Some(gt) = &session.ground_truth {
-        manifest["ground_truth"] = files.ground_truth("ground_truth.npz".into(), gt)?;
-    }
+    let ground_truth =
+        session.ground_truth.as_ref().map(|gt| files.ground_truth("ground_truth.npz".into(), gt)).transpose()?;
+    let manifest = SessionManifest {
+        format: FORMAT_NAME.into(),
+        version: FORMAT_VERSION,
+        name: session.name.clone(),
+        created_by: write::created_by(),
+        conventions: write::conventions(),
+        subject: subject_entry(&session.subject),
+        wearer,
+        observers,
+        ground_truth,
+        floor: session.floor.clone(),
+    };
     files.finish(&manifest)
 }
 
@@ -115,28 +126,21 @@ pub fn save_egoexo_with(
 pub(super) fn read_session_manifest(
     root: &FileTree,
     manifest_file: &str,
-    doc: &Value,
+    doc: &serde_json::Value,
 ) -> Result<(Session, Vec<ImportWarning>), ImportError> {
-    let ctx = JsonCtx::file(manifest_file);
-    let mut reader = ManifestReader { root, ctx, warnings: Vec::new() };
-    reader.known_keys(doc, "", keys::SESSION);
-    let name = ctx.str(ctx.field(doc, "", "name")?, "name")?.to_owned();
-    let subject = reader.subject_at(ctx.field(doc, "", "subject")?, "subject")?;
-    let wearer = reader.wearer(ctx.field(doc, "", "wearer")?)?;
-    let observers_value = ctx.field(doc, "", "observers")?;
+    let mut reader = ManifestReader { root, file: manifest_file, warnings: Vec::new() };
+    let manifest: SessionManifest = manifest::from_json(manifest_file, doc, &mut reader.warnings)?;
+    let subject = reader.subject(&manifest.subject, "subject")?;
+    let wearer = reader.wearer(&manifest.wearer)?;
     let mut observers = Vec::new();
-    for (i, v) in ctx.array(observers_value, "observers")?.iter().enumerate() {
-        observers.push(reader.observer(v, &format!("observers[{i}]"))?);
+    for (i, entry) in manifest.observers.iter().enumerate() {
+        observers.push(reader.observer(entry, &format!("observers[{i}]"))?);
     }
-    let ground_truth = match ctx.optional(doc, "", "ground_truth")? {
-        Some(v) => Some(reader.ground_truth(v, "ground_truth")?),
-        None => None,
-    };
-    let floor = match ctx.optional(doc, "", "floor")? {
-        Some(v) => Some(read_floor(&ctx, v)?),
-        None => None,
-    };
-    let mut session = Session { name, wearer, observers, subject, ground_truth, floor };
+    let ground_truth = manifest.ground_truth.as_ref().map(|gt| reader.ground_truth(gt, "ground_truth")).transpose()?;
+    if let Some(floor) = &manifest.floor {
+        check_floor(manifest_file, floor)?;
+    }
+    let mut session = Session { name: manifest.name, wearer, observers, subject, ground_truth, floor: manifest.floor };
     spread_fixed_poses(&mut session);
     Ok((session, reader.warnings))
 }
@@ -157,17 +161,18 @@ pub fn read_static_camera(
     let text = root.read_text(file)?;
     let ctx = JsonCtx::file(&display);
     let doc = ctx.parse(&text)?;
-    let mut reader = ManifestReader { root, ctx, warnings: Vec::new() };
-    reader.known_keys(&doc, "", keys::STATIC_CAMERA);
-    if let Some(t) = ctx.optional(&doc, "", "trajectory")? {
+    if let Some(t) = doc.get("trajectory").filter(|t| !t.is_null()) {
         return Err(ctx.invalid(
             "trajectory",
             "`pose` or a `placement` (a static camera); a worn device is an MPS device folder",
             t,
         ));
     }
-    let camera = reader.camera(ctx.field(&doc, "", "camera")?, "camera")?;
-    let (trajectory, placement) = reader.poses_and_placement(&doc, "", "trajectory")?;
+    let mut reader = ManifestReader { root, file: &display, warnings: Vec::new() };
+    let entry: StaticCameraFile = manifest::from_json(&display, &doc, &mut reader.warnings)?;
+    let camera = reader.camera(&entry.camera, "camera")?;
+    let (trajectory, placement) =
+        reader.poses_and_placement("", ("trajectory", None), entry.pose.as_ref(), entry.placement.as_ref())?;
     if placement.mount != Mount::Fixed {
         return Err(ImportError::invalid(
             &display,
@@ -180,39 +185,35 @@ pub fn read_static_camera(
 }
 
 impl ManifestReader<'_> {
-    fn wearer(&mut self, v: &Value) -> Result<Wearer, ImportError> {
-        let ctx = self.ctx;
-        self.known_keys(v, "wearer", keys::WEARER);
-        let head = self.trajectory(ctx.field(v, "wearer", "head")?, "wearer.head")?;
-        let left_wrist =
-            ctx.optional(v, "wearer", "left_wrist")?.map(|w| self.trajectory(w, "wearer.left_wrist")).transpose()?;
-        let right_wrist =
-            ctx.optional(v, "wearer", "right_wrist")?.map(|w| self.trajectory(w, "wearer.right_wrist")).transpose()?;
-        let head_joint_in_device = Vec3::from_array(
-            ctx.f32_array::<3>(ctx.field(v, "wearer", "head_joint_in_device")?, "wearer.head_joint_in_device")?,
-        );
-        let wrist_source = self.wrist_source(v, "wearer")?;
-        Ok(Wearer { head, left_wrist, right_wrist, wrist_source, head_joint_in_device })
+    fn wearer(&mut self, w: &WearerEntry) -> Result<Wearer, ImportError> {
+        Ok(Wearer {
+            head: self.trajectory(&w.head, "wearer.head")?,
+            left_wrist: self.optional_trajectory(w.left_wrist.as_ref(), "wearer.left_wrist")?,
+            right_wrist: self.optional_trajectory(w.right_wrist.as_ref(), "wearer.right_wrist")?,
+            wrist_source: w.wrist_source.clone().unwrap_or_default(),
+            head_joint_in_device: Vec3::from_array(from_wire(&w.head_joint_in_device)),
+        })
     }
 
-    fn observer(&mut self, v: &Value, path: &str) -> Result<Observer, ImportError> {
-        let ctx = self.ctx;
-        self.known_keys(v, path, keys::OBSERVER);
-        let id = self.id(v, path, "an observer")?;
-        let (head, placement) = self.poses_and_placement(v, path, "trajectory")?;
-        let camera = self.camera(ctx.field(v, path, "camera")?, &join(path, "camera"))?;
-        let keypoints = match ctx.optional(v, path, "keypoints")? {
+    fn observer(&mut self, o: &ObserverEntry, path: &str) -> Result<Observer, ImportError> {
+        let id = self.id(&o.id, &join(path, "id"), "an observer")?;
+        let (head, placement) = self.poses_and_placement(
+            path,
+            ("trajectory", o.trajectory.as_ref()),
+            o.pose.as_ref(),
+            o.placement.as_ref(),
+        )?;
+        let camera = self.camera(&o.camera, &join(path, "camera"))?;
+        let keypoints = match &o.keypoints {
             Some(k) => {
                 let file = self.data_path(k, &join(path, "keypoints"))?;
                 Some(read_keypoints_jsonl(&self.root.display_path(&file), &self.root.read_text(&file)?, &id)?)
             }
             None => None,
         };
-        let video = match ctx.optional(v, path, "video")? {
-            Some(video) => Some(self.video(video, &join(path, "video"), &id)?),
-            None => None,
-        };
-        let context_features = self.context_features_at(v, path)?;
+        let video = o.video.as_ref().map(|v| self.video(v, &join(path, "video"), &id)).transpose()?;
+        let context_features =
+            self.context_features_at(o.context_features.as_ref(), &join(path, "context_features"))?;
         Ok(Observer { id, head, camera, keypoints, video, context_features, placement })
     }
 }

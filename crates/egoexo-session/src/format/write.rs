@@ -1,6 +1,6 @@
 //! The blocks every manifest version writes the same way: data files (trajectories in the
 //! Aria MPS CSV layout, keypoints, videos' frame times, context features, ground truth) and
-//! the JSON of cameras, transforms, subjects and placements.
+//! the typed entries (`manifest.rs`) of cameras, transforms, subjects and placements.
 
 use std::collections::BTreeMap;
 
@@ -9,9 +9,11 @@ use egoexo_core::glam::Vec3;
 use egoexo_core::rigid::RigidTransform;
 use egoexo_core::skeleton::{NUM_BODY_JOINTS, NUM_JOINTS};
 use egoexo_motion_io::npz::NpzWriter;
-use serde_json::{Value, json};
 
-use super::{FORMAT_NAME, MANIFEST_FILE, WriteError, conventions_json};
+use super::manifest::{
+    CameraEntry, CameraModel, Conventions, F32, GroundTruthEntry, SubjectEntry, TransformEntry, VideoEntry, to_wire,
+};
+use super::{MANIFEST_FILE, WriteError};
 use crate::aria::trajectory::write_closed_loop_trajectory;
 use crate::keypoints::write_keypoints_jsonl;
 use crate::model::{ContextFeatureTrack, GroundTruth, KeypointTrack, SubjectInfo, Trajectory, VideoRef};
@@ -21,7 +23,7 @@ use crate::placement::{Mount, Placement, WorldRef};
 const SESSION_GRAVITY: Vec3 = Vec3::new(0.0, -9.81, 0.0);
 
 /// The files of a `.egoexo` being written (path → bytes); each method writes one data file and
-/// returns the manifest's JSON naming it.
+/// returns what the manifest names it by.
 #[derive(Default)]
 pub(super) struct DataFiles {
     files: BTreeMap<String, Vec<u8>>,
@@ -29,38 +31,39 @@ pub(super) struct DataFiles {
 
 impl DataFiles {
     /// A trajectory (`T_world_device` per timestamp) at `path`, in the Aria MPS CSV layout.
-    pub(super) fn trajectory(&mut self, path: String, t: &Trajectory) -> Value {
+    pub(super) fn trajectory(&mut self, path: String, t: &Trajectory) -> String {
         let csv = write_closed_loop_trajectory(&t.timestamps_ns, &t.poses, "egoexo", SESSION_GRAVITY);
-        self.files.insert(path.clone(), csv.into_bytes());
-        json!(path)
+        self.insert(path, csv.into_bytes())
+    }
+
+    /// An optional trajectory (a wrist) at `path`.
+    pub(super) fn optional_trajectory(&mut self, path: String, t: Option<&Trajectory>) -> Option<String> {
+        t.map(|t| self.trajectory(path, t))
     }
 
     /// `observer`'s keypoints at `path` (JSON lines).
-    pub(super) fn keypoints(&mut self, path: String, observer: &str, keypoints: &KeypointTrack) -> Value {
-        self.files.insert(path.clone(), write_keypoints_jsonl(observer, keypoints).into_bytes());
-        json!(path)
+    pub(super) fn keypoints(&mut self, path: String, observer: &str, keypoints: &KeypointTrack) -> String {
+        self.insert(path, write_keypoints_jsonl(observer, keypoints).into_bytes())
     }
 
     /// A file written elsewhere (e.g. people without identity) at `path`.
-    pub(super) fn insert(&mut self, path: String, bytes: Vec<u8>) -> Value {
+    pub(super) fn insert(&mut self, path: String, bytes: Vec<u8>) -> String {
         self.files.insert(path.clone(), bytes);
-        json!(path)
+        path
     }
 
     /// A video reference `{path, start_ns, timestamps?}`; its frame times, when known, in
     /// `<dir>/video_timestamps.csv`. The video itself is not written here.
-    pub(super) fn video(&mut self, dir: &str, video: &VideoRef) -> Value {
-        let mut entry = json!({"path": video.path, "start_ns": video.start_ns});
-        if !video.frame_times_ns.is_empty() {
-            let path = format!("{dir}/video_timestamps.csv");
+    pub(super) fn video(&mut self, dir: &str, video: &VideoRef) -> VideoEntry {
+        let timestamps = (!video.frame_times_ns.is_empty()).then(|| {
             let csv = crate::video::write_frame_timestamps(&video.frame_times_ns);
-            entry["timestamps"] = self.insert(path, csv.into_bytes());
-        }
-        entry
+            self.insert(format!("{dir}/video_timestamps.csv"), csv.into_bytes())
+        });
+        VideoEntry { path: video.path.clone(), start_ns: video.start_ns, timestamps }
     }
 
     /// Context features as `<dir>/context_features.npz`: `timestamps_ns` (N,), `values` (N, D).
-    pub(super) fn context_features(&mut self, dir: &str, features: &ContextFeatureTrack) -> Result<Value, WriteError> {
+    pub(super) fn context_features(&mut self, dir: &str, features: &ContextFeatureTrack) -> Result<String, WriteError> {
         let path = format!("{dir}/context_features.npz");
         let mut npz = NpzWriter::new();
         let n = features.timestamps_ns.len() as u64;
@@ -72,30 +75,31 @@ impl DataFiles {
 
     /// Ground truth: its motion at `path` (the arrays of the module docs) and the manifest's
     /// `{motion, occlusion_observers?}`.
-    pub(super) fn ground_truth(&mut self, path: String, gt: &GroundTruth) -> Result<Value, WriteError> {
+    pub(super) fn ground_truth(&mut self, path: String, gt: &GroundTruth) -> Result<GroundTruthEntry, WriteError> {
         let bytes = ground_truth_npz(gt, &path)?;
-        let mut entry = json!({"motion": self.insert(path, bytes)});
-        if !gt.occlusion.is_empty() {
-            entry["occlusion_observers"] =
-                json!(gt.occlusion.iter().map(|o| o.observer_id.clone()).collect::<Vec<_>>());
-        }
-        Ok(entry)
+        let occlusion_observers =
+            (!gt.occlusion.is_empty()).then(|| gt.occlusion.iter().map(|o| o.observer_id.clone()).collect());
+        Ok(GroundTruthEntry { motion: self.insert(path, bytes), occlusion_observers })
     }
 
-    /// A device's poses and placement into its manifest `entry`: a worn device's trajectory at
-    /// `trajectory_path` under `trajectory_key`, a static camera's one `pose`, or nothing (a
-    /// static camera that knows no pose); `placement` unless it is the default. `what` names
-    /// the device in errors.
+    /// A device's poses and placement as its manifest entry holds them: a worn device's
+    /// trajectory file at `trajectory_path`, or a static camera's one pose (none for a static
+    /// camera in its own world that knows no pose: that world is its optical frame); the
+    /// placement unless it is the default. `what` names the device in errors.
     pub(super) fn poses_and_placement(
         &mut self,
-        entry: &mut Value,
-        (trajectory_key, trajectory_path): (&str, String),
+        trajectory_path: String,
         placement: &Placement,
         poses: &Trajectory,
         what: &str,
-    ) -> Result<(), WriteError> {
+    ) -> Result<WrittenPoses, WriteError> {
+        let mut written = WrittenPoses {
+            trajectory: None,
+            pose: None,
+            placement: (!placement.is_default()).then(|| placement.clone()),
+        };
         if placement.mount == Mount::Worn {
-            entry[trajectory_key] = self.trajectory(trajectory_path, poses);
+            written.trajectory = Some(self.trajectory(trajectory_path, poses));
         } else {
             let pose = poses.poses.first().copied().unwrap_or(RigidTransform::IDENTITY);
             if poses.poses.iter().any(|p| *p != pose) {
@@ -104,19 +108,15 @@ impl DataFiles {
                     message: "a fixed mount has one pose; its trajectory moves".into(),
                 });
             }
-            // A static camera in its own world without a pose: that world is its optical frame.
             if !(placement.world == WorldRef::Own && pose == RigidTransform::IDENTITY) {
-                entry["pose"] = transform_json(&pose);
+                written.pose = Some(transform_entry(&pose));
             }
         }
-        if !placement.is_default() {
-            entry["placement"] = to_json(placement, &format!("{what} placement"))?;
-        }
-        Ok(())
+        Ok(written)
     }
 
     /// The files with the manifest added as `session.json`.
-    pub(super) fn finish(mut self, manifest: &Value) -> Result<BTreeMap<String, Vec<u8>>, WriteError> {
+    pub(super) fn finish(mut self, manifest: &impl serde::Serialize) -> Result<BTreeMap<String, Vec<u8>>, WriteError> {
         let text = serde_json::to_string_pretty(manifest)
             .map_err(|e| WriteError::Encode { what: MANIFEST_FILE.into(), message: e.to_string() })?;
         self.files.insert(MANIFEST_FILE.into(), text.into_bytes());
@@ -124,16 +124,22 @@ impl DataFiles {
     }
 }
 
-/// The fields every manifest starts with: `format`, `version`, `name`, `created_by`,
-/// `conventions`.
-pub(super) fn manifest_header(version: u32, name: &str) -> Value {
-    json!({
-        "format": FORMAT_NAME,
-        "version": version,
-        "name": name,
-        "created_by": format!("egoexo-session {}", env!("CARGO_PKG_VERSION")),
-        "conventions": conventions_json(),
-    })
+/// A device's poses and placement as a manifest entry holds them
+/// ([`DataFiles::poses_and_placement`]).
+pub(super) struct WrittenPoses {
+    pub trajectory: Option<String>,
+    pub pose: Option<TransformEntry>,
+    pub placement: Option<Placement>,
+}
+
+/// `created_by` of every manifest this build writes.
+pub(super) fn created_by() -> Option<String> {
+    Some(format!("egoexo-session {}", env!("CARGO_PKG_VERSION")))
+}
+
+/// The `conventions` every manifest holds.
+pub(super) fn conventions() -> Conventions {
+    Conventions::session()
 }
 
 /// The `.egoexo` zip of `files`.
@@ -157,59 +163,35 @@ pub(super) fn with_extra_files(
     Ok(files)
 }
 
-/// A serde value as JSON; `what` names it in the error.
-pub(super) fn to_json<T: serde::Serialize>(value: &T, what: &str) -> Result<Value, WriteError> {
-    serde_json::to_value(value).map_err(|e| WriteError::Encode { what: what.into(), message: e.to_string() })
-}
-
 fn encode<T, E: std::fmt::Display>(result: Result<T, E>, what: &str) -> Result<T, WriteError> {
     result.map_err(|e| WriteError::Encode { what: what.into(), message: e.to_string() })
 }
 
-/// An f32 as the JSON number with the same shortest decimal form (`1.7`, not
-/// `1.7000000476837158`); reading it as f64 and casting back gives the same f32.
-fn f32_json(x: f32) -> Value {
-    x.to_string().parse::<f64>().ok().and_then(serde_json::Number::from_f64).map_or(Value::Null, Value::Number)
+pub(super) fn transform_entry(t: &RigidTransform) -> TransformEntry {
+    TransformEntry { translation: to_wire(t.translation.to_array()), rotation_xyzw: to_wire(t.rotation.to_array()) }
 }
 
-pub(super) fn f32s(values: &[f32]) -> Value {
-    Value::Array(values.iter().map(|&x| f32_json(x)).collect())
-}
-
-fn transform_json(t: &RigidTransform) -> Value {
-    json!({"translation": f32s(&t.translation.to_array()), "rotation_xyzw": f32s(&t.rotation.to_array())})
-}
-
-pub(super) fn camera_json(camera: &CameraCalibration) -> Value {
-    let (model, params): (&str, Vec<f32>) = match &camera.projection {
-        Projection::Pinhole(k) => ("pinhole", vec![k.fx, k.fy, k.cx, k.cy]),
-        Projection::Fisheye624(f) => ("fisheye624", f.params().to_vec()),
+pub(super) fn camera_entry(camera: &CameraCalibration) -> CameraEntry {
+    let (model, params): (CameraModel, Vec<f32>) = match &camera.projection {
+        Projection::Pinhole(k) => (CameraModel::Pinhole, vec![k.fx, k.fy, k.cx, k.cy]),
+        Projection::Fisheye624(f) => (CameraModel::Fisheye624, f.params().to_vec()),
     };
-    let mut v = json!({
-        "model": model,
-        "params": f32s(&params),
-        "width": camera.width,
-        "height": camera.height,
-        "t_device_camera": transform_json(&camera.t_device_camera),
-    });
-    if let Some(r) = camera.valid_radius_px {
-        v["valid_radius_px"] = f32_json(r);
+    CameraEntry {
+        model,
+        params: params.into_iter().map(F32).collect(),
+        width: camera.width,
+        height: camera.height,
+        t_device_camera: transform_entry(&camera.t_device_camera),
+        valid_radius_px: camera.valid_radius_px.map(F32),
     }
-    v
 }
 
-pub(super) fn subject_json(subject: &SubjectInfo) -> Value {
-    let mut v = json!({});
-    if let Some(h) = subject.height_m {
-        v["height_m"] = f32_json(h);
+pub(super) fn subject_entry(subject: &SubjectInfo) -> SubjectEntry {
+    SubjectEntry {
+        height_m: subject.height_m.map(F32),
+        betas: subject.betas.as_ref().map(|b| b.iter().copied().map(F32).collect()),
+        rest_joints: subject.rest_joints.as_ref().map(|j| j.iter().map(|p| to_wire(p.to_array())).collect()),
     }
-    if let Some(b) = &subject.betas {
-        v["betas"] = f32s(b);
-    }
-    if let Some(j) = &subject.rest_joints {
-        v["rest_joints"] = Value::Array(j.iter().map(|p| f32s(&p.to_array())).collect());
-    }
-    v
 }
 
 fn ground_truth_npz(gt: &GroundTruth, path: &str) -> Result<Vec<u8>, WriteError> {

@@ -67,6 +67,9 @@ export class DeviceSocket {
       this.welcomed = true;
       this.retries = 0;
       this.hooks.onWelcome(parsed);
+    } else if (parsed.type === 'observer-world') {
+      // A watching page's word on this observer's registration (docs/live-protocol.md).
+      this.hooks.onObserverWorld?.(parsed);
     }
   }
 

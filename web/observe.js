@@ -126,6 +126,10 @@ class Observation {
         onWelcome: () => this.relay.sendText(this.calibration),
         onFail: (text) => this.fail(text),
       }),
+      onObserverWorld: (world) => {
+        this.world = world;
+        this.showStats();
+      },
     });
     this.worker = null;
     this.workerReady = false;
@@ -135,6 +139,7 @@ class Observation {
     this.detected = new Rate();
     this.detectMs = [];
     this.last = null; // the newest detection, for the overlay
+    this.world = null; // the newest word from a watching page on this camera's registration
     this.uiTimer = setInterval(() => this.showStats(), 250);
     this.awake = new ScreenAwake();
   }
@@ -294,8 +299,12 @@ class Observation {
     ui.cropSource.textContent = ended || !last ? '—' : last.cropSource;
     const { sent, skipped } = this.relay;
     ui.framesSent.textContent = `${sent}${skipped ? ` (${skipped} skipped on a slow network)` : ''}`;
+    // What the page watching the room says: registering (not used yet), then registered (its
+    // rays are fused), with why.
+    const world = this.world;
     ui.registration.textContent = ended ? '—'
-      : 'by the page watching the room (its device list shows this camera registering, then registered)';
+      : world ? world.message : 'waiting for a page watching the room to register this camera';
+    document.body.dataset.registration = ended || !world ? 'none' : world.state;
     document.body.dataset.detections = last ? String(last.found) : '0';
   }
 }

@@ -30,6 +30,8 @@ pub const LIVE_PROTOCOL_VERSION: u32 = 1;
 pub const HISTORY_S: f64 = 3.2;
 /// Largest message a client may send, bytes.
 pub const MAX_MESSAGE_BYTES: usize = 64 << 10;
+/// Longest `message` of an [`ClientMessage::ObserverWorld`], characters.
+pub const MAX_WORLD_MESSAGE_CHARS: usize = 400;
 
 /// A room's id: 22 characters of base64url (128 random bits).
 pub type RoomId = String;
@@ -295,6 +297,29 @@ pub enum ClientMessage {
     /// The answer to a relay [`RelayMessage::Ping`]: the relay's time echoed, and the device's
     /// clock when it answered.
     Pong { relay_ns: i64, device_ns: i64 },
+    /// A viewer's word on an observer in a world of its own: where the viewer's registration
+    /// of it stands (`docs/registration.md`, "Live"). The relay passes it to that device as a
+    /// [`RelayMessage::ObserverWorld`], so a camera page can say whether its view is used.
+    /// Viewers only; `message` at most [`MAX_WORLD_MESSAGE_CHARS`] characters. (Added within
+    /// version 1: devices ignore relay messages they do not know.)
+    ObserverWorld { device: String, state: WorldState, message: String },
+}
+
+/// Where a viewer's registration of an observer's world stands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum WorldState {
+    /// Not yet registered (or its world jumped): not fused.
+    Registering,
+    /// Registered: its rays are fused.
+    Registered,
+}
+
+impl WorldState {
+    /// From the worker's `observer_worlds` state (`"registered"`, anything else registering).
+    pub fn from_name(name: &str) -> Self {
+        if name == "registered" { WorldState::Registered } else { WorldState::Registering }
+    }
 }
 
 /// One channel of the room, as viewers see it.
@@ -380,6 +405,10 @@ pub enum RelayMessage {
         clock_offset_ns: Option<i64>,
         clock_uncertainty_ns: Option<i64>,
     },
+    /// To an observer: where a viewer's registration of its world stands
+    /// ([`ClientMessage::ObserverWorld`]), from viewer `viewer` (a room's viewers each register
+    /// on their own; the newest word is the one to show).
+    ObserverWorld { viewer: u32, state: WorldState, message: String },
 }
 
 /// Why the relay closed a connection: the WebSocket close code, with a sentence as the reason.

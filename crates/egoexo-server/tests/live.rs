@@ -13,7 +13,8 @@ use egoexo_core::glam::{Quat, Vec2, Vec3};
 use egoexo_core::rigid::RigidTransform;
 use egoexo_protocol::live::{
     ChannelInfo, ClientMessage, CloseKind, DataFrame, DeviceHello, DeviceMount, DeviceRole, DeviceStatus, DeviceWorld,
-    FramePayload, Join, LIVE_PROTOCOL_VERSION, LIVE_SUBPROTOCOL, MAX_MESSAGE_BYTES, RelayMessage, RoomCreated, Stream,
+    FramePayload, Join, LIVE_PROTOCOL_VERSION, LIVE_SUBPROTOCOL, MAX_MESSAGE_BYTES, MAX_WORLD_MESSAGE_CHARS,
+    RelayMessage, RoomCreated, Stream, WorldState,
 };
 use egoexo_server::{ApiLimits, LiveLimits, LiveState, Server, ServerOptions};
 use futures::{SinkExt, StreamExt};
@@ -740,4 +741,59 @@ async fn a_fixed_camera_publishes_keypoints_only_and_viewers_see_its_mount() {
     let channel = &channels[0];
     assert_eq!((channel.stream, channel.mount, channel.focal_known), (Stream::Keypoints, DeviceMount::Fixed, false));
     assert_eq!(channel.world, DeviceWorld::Own);
+}
+
+/// The words on a viewer's word about an observer's world this client heard.
+fn world_words(heard: &[Heard]) -> Vec<(u32, WorldState, String)> {
+    heard
+        .iter()
+        .filter_map(|h| match h {
+            Heard::Message(RelayMessage::ObserverWorld { viewer, state, message }) => {
+                Some((*viewer, *state, message.clone()))
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+#[tokio::test]
+async fn a_viewers_word_on_an_observers_world_reaches_that_observer_only() {
+    let relay = relay(test_limits()).await;
+    let room = create_room(relay.addr).await;
+    let mut viewer = welcomed_viewer(relay.addr, &room).await;
+    let mut wearer = head_wearer(relay.addr, &room).await;
+    let tripod = device_hello(device_join(&room), "tripod", DeviceRole::Observer, &[Stream::Keypoints]);
+    let mut camera = Client::connect(relay.addr, tripod, 0, true).await;
+    camera.welcome().await;
+    let word = |device: &str, state: WorldState, message: &str| {
+        json(&ClientMessage::ObserverWorld { device: device.into(), state, message: message.into() })
+    };
+    // One for the camera, one naming the wearer (not an observer), one naming nobody.
+    viewer.send(word("wearer", WorldState::Registered, "not an observer"));
+    viewer.send(word("nobody", WorldState::Registered, "no such device"));
+    viewer.send(word("tripod", WorldState::Registering, "registering — 3 s of views"));
+    viewer.send(word("tripod", WorldState::Registered, "registered after 4.2 s of views"));
+    let heard =
+        camera.listen_until(Duration::from_secs(10), Duration::from_millis(300), |h| world_words(h).len() >= 2).await;
+    let words: Vec<(WorldState, String)> = world_words(&heard).into_iter().map(|(_, s, m)| (s, m)).collect();
+    assert_eq!(
+        words,
+        [
+            (WorldState::Registering, "registering — 3 s of views".to_string()),
+            (WorldState::Registered, "registered after 4.2 s of views".to_string()),
+        ]
+    );
+    assert!(world_words(&wearer.listen(Duration::from_millis(300)).await).is_empty(), "the wearer heard a word");
+    // Only viewers say it, and briefly: a device that does is closed, as is a viewer whose
+    // message is over the limit (the others carry on).
+    camera.send(word("tripod", WorldState::Registered, "I say so myself"));
+    let (code, reason) = camera.closed().await;
+    assert_eq!(code, CloseKind::NotAllowed.code(), "{reason}");
+    let long = "x".repeat(MAX_WORLD_MESSAGE_CHARS + 1);
+    viewer.send(word("tripod", WorldState::Registering, &long));
+    let (code, reason) = viewer.closed().await;
+    assert_eq!(code, CloseKind::Malformed.code(), "{reason}");
+    assert!(reason.contains("observer-world"), "{reason}");
+    wearer.send_frame(Stream::Head, pose(0.0));
+    assert!(!matches!(wearer.next(Duration::from_millis(300)).await, Some(Heard::Closed(_))));
 }

@@ -24,12 +24,13 @@
 //! their poses are mapped into the wearer's world and fused; a world that jumps is
 //! registered again. Every frame says where each stands ([`LiveFrame::observer_worlds`]).
 
+use std::collections::BTreeMap;
 use std::ops::Range;
 
 use egoexo_core::aligned::Timeline;
 use egoexo_infer::windows::WINDOW;
 use egoexo_infer::{Engine, InferError, Method, ReconstructOptions};
-use egoexo_protocol::live::{DataFrame, RelayMessage};
+use egoexo_protocol::live::{ClientMessage, DataFrame, MAX_WORLD_MESSAGE_CHARS, RelayMessage, WorldState};
 use egoexo_protocol::worker::{LiveFrameInfo, LiveObserverWorld, LiveTakeSummary};
 use egoexo_register::RegisterError;
 use egoexo_register::live::{RollingRegistration, RollingSettings, RollingState};
@@ -355,5 +356,98 @@ impl LiveFrame {
             wearers: self.wearers.clone(),
             observer_worlds: self.observer_worlds.clone(),
         }
+    }
+}
+
+/// What this viewer tells each observer in a world of its own about its registration
+/// ([`ClientMessage::ObserverWorld`], which the relay passes to the observer so that a camera
+/// page can show whether its view is used): a change of state at once, a new message at most
+/// every [`WorldReports::MESSAGE_EVERY_MS`], and the same again every
+/// [`WorldReports::REPEAT_EVERY_MS`] (an observer that reconnected hears it too).
+#[derive(Debug, Default)]
+pub struct WorldReports {
+    /// Per observer: the state and message last sent, and when (viewer clock, ms).
+    sent: BTreeMap<String, (WorldState, String, f64)>,
+}
+
+impl WorldReports {
+    pub const MESSAGE_EVERY_MS: f64 = 1_000.0;
+    pub const REPEAT_EVERY_MS: f64 = 5_000.0;
+
+    /// The reports due at `now_ms` (the viewer's clock, ms) for a frame's `worlds`.
+    pub fn due(&mut self, worlds: &[LiveObserverWorld], now_ms: f64) -> Vec<ClientMessage> {
+        let mut due = Vec::new();
+        for world in worlds {
+            let state = WorldState::from_name(&world.state);
+            let message: String = world.message.chars().take(MAX_WORLD_MESSAGE_CHARS).collect();
+            let send = self.sent.get(&world.observer).is_none_or(|(sent_state, sent_message, at)| {
+                let since_ms = now_ms - at;
+                *sent_state != state
+                    || (*sent_message != message && since_ms >= Self::MESSAGE_EVERY_MS)
+                    || since_ms >= Self::REPEAT_EVERY_MS
+            });
+            if send {
+                self.sent.insert(world.observer.clone(), (state, message.clone(), now_ms));
+                due.push(ClientMessage::ObserverWorld { device: world.observer.clone(), state, message });
+            }
+        }
+        due
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use egoexo_protocol::live::{ClientMessage, WorldState};
+    use egoexo_protocol::worker::LiveObserverWorld;
+
+    use super::WorldReports;
+
+    fn world(observer: &str, state: &str, message: &str) -> LiveObserverWorld {
+        LiveObserverWorld {
+            observer: observer.into(),
+            state: state.into(),
+            views_s: 0.0,
+            registered_after_s: None,
+            yaw_deg: None,
+            translation_m: None,
+            sigma_yaw_deg: None,
+            sigma_translation_m: None,
+            jumps: 0,
+            message: message.into(),
+        }
+    }
+
+    fn said(reports: Vec<ClientMessage>) -> Vec<(String, WorldState, String)> {
+        reports
+            .into_iter()
+            .map(|r| match r {
+                ClientMessage::ObserverWorld { device, state, message } => (device, state, message),
+                other => panic!("{other:?}"),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn observers_hear_a_new_state_at_once_a_new_message_each_second_and_the_same_every_five() {
+        let mut reports = WorldReports::default();
+        let registering = |s: u32| world("tripod", "registering", &format!("registering — {s} s of views"));
+        assert_eq!(said(reports.due(&[registering(3)], 0.0)).len(), 1);
+        // The message changes every frame; it goes out once a second.
+        assert!(reports.due(&[registering(3)], 100.0).is_empty());
+        assert!(reports.due(&[registering(4)], 900.0).is_empty());
+        assert_eq!(
+            said(reports.due(&[registering(4)], 1_000.0)),
+            [("tripod".to_string(), WorldState::Registering, "registering — 4 s of views".to_string())]
+        );
+        // A new state at once; the same state and message again after 5 s.
+        let registered = world("tripod", "registered", "registered after 4.2 s of views");
+        assert_eq!(said(reports.due(std::slice::from_ref(&registered), 1_010.0))[0].1, WorldState::Registered);
+        assert!(reports.due(std::slice::from_ref(&registered), 6_000.0).is_empty());
+        assert_eq!(reports.due(std::slice::from_ref(&registered), 6_010.0).len(), 1);
+        // Each observer on its own; a message over the limit is cut to it.
+        let long = world("phone", "registering", &"x".repeat(1_000));
+        let out = said(reports.due(&[registered, long], 6_020.0));
+        assert_eq!(out.len(), 1);
+        assert_eq!(out[0].2.chars().count(), egoexo_protocol::live::MAX_WORLD_MESSAGE_CHARS);
     }
 }

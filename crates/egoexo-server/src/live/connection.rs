@@ -10,7 +10,7 @@ use std::time::Duration;
 use axum::extract::ws::{CloseFrame, Message, WebSocket};
 use egoexo_protocol::live::{
     ClientMessage, Close, CloseKind, DeviceHello, DeviceRole, Join, LIVE_PROTOCOL_VERSION, LIVE_SUBPROTOCOL,
-    MAX_MESSAGE_BYTES, RelayMessage, valid_device_id,
+    MAX_MESSAGE_BYTES, MAX_WORLD_MESSAGE_CHARS, RelayMessage, valid_device_id,
 };
 use futures::stream::{SplitSink, SplitStream};
 use futures::{SinkExt, StreamExt};
@@ -282,6 +282,19 @@ impl Reader {
                             None => self.room.viewer_pong(self.client, sample),
                         }
                         Ok(Handled::Pong)
+                    }
+                    ClientMessage::ObserverWorld { device, state, message } => {
+                        if self.device.is_some() {
+                            return Err(Close::new(CloseKind::NotAllowed, "only viewers report an observer's world"));
+                        }
+                        if message.chars().count() > MAX_WORLD_MESSAGE_CHARS {
+                            return Err(Close::new(
+                                CloseKind::Malformed,
+                                format!("an observer-world message over {MAX_WORLD_MESSAGE_CHARS} characters"),
+                            ));
+                        }
+                        self.room.observer_world(&device, self.client, state, message);
+                        Ok(Handled::Nothing)
                     }
                 }
             }

@@ -8,7 +8,7 @@ use bytes::{Bytes, BytesMut};
 use egoexo_core::camera::CameraCalibration;
 use egoexo_protocol::live::{
     ChannelInfo, Close, CloseKind, DataFrame, DeviceHello, DeviceRole, DeviceStatus, HEADER_BYTES, RelayMessage,
-    RoomId, Stream,
+    RoomId, Stream, WorldState,
 };
 use subtle::ConstantTimeEq;
 
@@ -322,6 +322,15 @@ impl Room {
         }
         inner.calibrations.insert(device.to_string(), camera);
         Ok(())
+    }
+
+    /// Viewer `viewer`'s word on observer `device`'s world, passed to that observer (when it is
+    /// one, and connected; otherwise dropped: it may have left).
+    pub fn observer_world(&self, device: &str, viewer: u32, state: WorldState, message: String) {
+        let inner = self.lock();
+        if let Some(DeviceState { role: DeviceRole::Observer, outbox: Some(outbox), .. }) = inner.devices.get(device) {
+            outbox.push_message(to_json(&RelayMessage::ObserverWorld { viewer, state, message }));
+        }
     }
 
     /// A device's data frame: checked, stamped on the relay clock, kept in the history and

@@ -18,7 +18,7 @@ use wasm_bindgen_futures::spawn_local;
 use web_sys::{BinaryType, CloseEvent, MessageChannel, MessageEvent, WebSocket};
 
 use super::{Event, Runtime, yield_on};
-use crate::live::LiveReconstructor;
+use crate::live::{LiveReconstructor, WorldReports};
 
 #[wasm_bindgen]
 extern "C" {
@@ -30,6 +30,8 @@ extern "C" {
 pub(super) struct LiveConnection {
     socket: WebSocket,
     pub(super) reconstructor: LiveReconstructor,
+    /// What this viewer told each observer about its registration.
+    world_reports: WorldReports,
     /// Whether the reconstruction loop is running.
     reconstructing: Cell<bool>,
     /// Yields of the reconstruction loop (its own channel: the job loop has another).
@@ -98,6 +100,7 @@ pub(super) fn join(runtime: &Rc<Runtime>, url: &str, room: String, secret: Strin
     *runtime.live.borrow_mut() = Some(LiveConnection {
         socket,
         reconstructor: LiveReconstructor::new(fps, lookahead),
+        world_reports: WorldReports::default(),
         reconstructing: Cell::new(false),
         channel,
         _on_open: on_open,
@@ -184,10 +187,11 @@ async fn reconstruct_loop(runtime: Rc<Runtime>) {
             frame.map(|f| f.map(|f| (f, lookahead, compute_ms)))
         };
         match result {
-            Ok(Some((frame, lookahead, compute_ms))) => runtime.post(WorkerEvent::LiveFrame {
-                scene: JsBytes::copy_from(&frame.scene_json),
-                frame: LiveFrameInfo { compute_ms, posted_ms: runtime.clock_ms(), ..frame.info(lookahead) },
-            }),
+            Ok(Some((frame, lookahead, compute_ms))) => {
+                let info = LiveFrameInfo { compute_ms, posted_ms: runtime.clock_ms(), ..frame.info(lookahead) };
+                report_worlds(&runtime, &info);
+                runtime.post(WorkerEvent::LiveFrame { scene: JsBytes::copy_from(&frame.scene_json), frame: info });
+            }
             Ok(None) => break,
             Err(e) => {
                 // That frame is passed over (the reconstructor moved on); newer ones follow.
@@ -197,5 +201,18 @@ async fn reconstruct_loop(runtime: Rc<Runtime>) {
     }
     if let Some(connection) = runtime.live.borrow().as_ref() {
         connection.reconstructing.set(false);
+    }
+}
+
+/// Tells the observers in worlds of their own where this viewer's registration of them stands
+/// (through the relay; [`WorldReports`] says when).
+fn report_worlds(runtime: &Runtime, info: &LiveFrameInfo) {
+    let Some(now_ms) = runtime.clock_ms() else { return };
+    let mut live = runtime.live.borrow_mut();
+    let Some(connection) = live.as_mut() else { return };
+    for report in connection.world_reports.due(&info.observer_worlds, now_ms) {
+        if let Ok(text) = serde_json::to_string(&report) {
+            let _ = connection.socket.send_with_str(&text);
+        }
     }
 }

@@ -135,7 +135,8 @@ async fn record(server: &ServerAddress, join: egoexo_protocol::live::Join, args:
                     let pong = ClientMessage::Pong { relay_ns, device_ns: client::system_ns() };
                     socket.send(client::json(&pong)).await?;
                 }
-                Ok(RelayMessage::Welcome { .. }) => {}
+                // A recorder is a viewer: words on observers' worlds go to observers.
+                Ok(RelayMessage::Welcome { .. } | RelayMessage::ObserverWorld { .. }) => {}
                 Err(e) => bail!("a message from the relay: {e}"),
             },
             Some(Ok(Message::Close(frame))) => {

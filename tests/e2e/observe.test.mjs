@@ -130,7 +130,7 @@ describe('observer page', () => {
     // placed 26–70 cm off and fused in 2 of 6 runs. The film's start was taken as the first
     // frame the page saw, up to a second after the camera's first, so the wearer's replay ran
     // late against the film; from the capture time less the media time it is the camera's
-    // first frame, and 5 of 5 runs placed it 9–31 cm off and fused it.)
+    // first frame, and 6 of 6 runs placed it 9–37 cm off and fused it.)
     await t.test('placed within a tenth of its distance to the wearer, then its rays fused', async (sub) => {
       // The filmed camera's true place (its registration maps the page's device frame, the
       // camera frame, into the wearer's world), within a tenth of its distance to the wearer —

@@ -1,5 +1,5 @@
 """The PyTorch FK of the position loss equals the Rust core's FK (fixture written by
-crates/egoexo-core/tests/fk_parity_fixture.rs), to 1e-5 m."""
+crates/egoexo-core/tests/core_tests/fk_parity_fixture.rs), to 1e-5 m."""
 
 import json
 from pathlib import Path

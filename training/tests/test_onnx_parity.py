@@ -1,7 +1,7 @@
 """onnxruntime runs the exported networks like PyTorch did: the engine's fixture
 (crates/egoexo-infer/tests/fixtures/models, written by `egoexo_train.export --random-init`)
 stores seeded inputs with the PyTorch and onnxruntime outputs; tract is checked against the
-same numbers in crates/egoexo-infer/tests/parity.rs."""
+same numbers in crates/egoexo-infer/tests/infer_tests/parity.rs."""
 
 import json
 from pathlib import Path

@@ -412,16 +412,22 @@ impl WasmSelection {
     }
 }
 
-/// The integration tests of the crate at `dir`: the stems of its `tests/*.rs`.
+/// The integration tests of the crate at `dir`, as cargo finds them: the stems of its
+/// `tests/*.rs` and the names of its `tests/*/main.rs`.
 fn integration_tests(dir: &Path) -> Result<Vec<String>> {
     let tests = dir.join("tests");
     let mut names = Vec::new();
     if tests.is_dir() {
         for entry in std::fs::read_dir(&tests).with_context(|| format!("listing {}", tests.display()))? {
             let path = entry?.path();
-            if path.extension().is_some_and(|e| e == "rs") && path.is_file() {
-                names.extend(path.file_stem().map(|s| s.to_string_lossy().into_owned()));
-            }
+            let name = if path.extension().is_some_and(|e| e == "rs") && path.is_file() {
+                path.file_stem()
+            } else if path.join("main.rs").is_file() {
+                path.file_name()
+            } else {
+                None
+            };
+            names.extend(name.map(|s| s.to_string_lossy().into_owned()));
         }
     }
     names.sort();
@@ -537,15 +543,35 @@ mod tests {
         let args = selection.args.join(" ");
         assert!(args.starts_with("--package egoexo-viewer --package egoexo-core --package egoexo-video"), "{args}");
         assert!(args.contains(" --lib "), "{args}");
-        for test in ["browser", "rotations", "worker_wasm", "parity_wasm", "export_wasm", "import_wasm"] {
+        // egoexo-core's tests: its one-binary suite (`tests/core_tests/main.rs`) and the one
+        // that runs in a dedicated worker.
+        for test in
+            ["browser", "core_tests", "pipeline_in_worker", "worker_wasm", "parity_wasm", "export_wasm", "import_wasm"]
+        {
             assert!(args.contains(&format!("--test {test}")), "{test} missing from {args}");
         }
-        // A name two selected crates share is refused: `--test live` would build both crates'
-        // `live` tests (egoexo-register's too), whatever the entry meant.
-        const CLASH: &[WasmTests] =
-            &[WasmTests::Target("egoexo-web-worker", "live"), WasmTests::Target("egoexo-register", "register")];
-        let error = WasmSelection::new(root, CLASH).err().expect("a shared test name is refused").to_string();
-        assert!(error.contains("`--test live`"), "{error}");
+    }
+
+    #[test]
+    fn a_test_name_two_selected_crates_share_is_refused() {
+        // `--test live` would build both crates' `live` tests, whatever the entry meant; a
+        // folder test (`tests/live/main.rs`) has its folder's name.
+        let root = std::env::temp_dir().join(format!("xtask-wasm-selection-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        std::fs::create_dir_all(root.join("crates/a/tests")).unwrap();
+        std::fs::create_dir_all(root.join("crates/b/tests/live")).unwrap();
+        std::fs::write(root.join("crates/a/tests/live.rs"), "").unwrap();
+        std::fs::write(root.join("crates/a/tests/other.rs"), "").unwrap();
+        std::fs::write(root.join("crates/b/tests/live/main.rs"), "").unwrap();
+        const WHOLE_CRATE: &[WasmTests] = &[WasmTests::Crate("a"), WasmTests::Target("b", "other")];
+        const CLASH: &[WasmTests] = &[WasmTests::Target("a", "live"), WasmTests::Target("b", "live")];
+        let whole = WasmSelection::new(&root, WHOLE_CRATE).err().map(|e| e.to_string());
+        let clash = WasmSelection::new(&root, CLASH).err().map(|e| e.to_string());
+        let _ = std::fs::remove_dir_all(&root);
+        let whole = whole.expect("crate a's `live` clashes with crate b's folder test");
+        assert!(whole.contains("`--test live`"), "{whole}");
+        let clash = clash.expect("a shared test name is refused");
+        assert!(clash.contains("`--test live`"), "{clash}");
     }
 
     /// The `{ opt-level = 0 }` entries of the `[profile.<profile>.package]` table.

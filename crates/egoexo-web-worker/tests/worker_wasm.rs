@@ -1,6 +1,6 @@
 //! The worker module in headless Chromium, in a dedicated Web Worker (where the app runs it):
 //! the fixture session through [`SessionWorker`] with the fixture networks must give the frame
-//! count and joint positions the native engine recorded (`tests/native.rs`), run EgoNet once
+//! count and joint positions the native engine recorded (`tests/worker_tests/native.rs`), run EgoNet once
 //! per window for ego-exo and the overlay, and stop between steps when cancelled; and the
 //! protocol's messages must cross serde-wasm-bindgen as documented, byte buffers as the very
 //! same `Uint8Array` objects. (`WorkerApp`'s message loop, which fetches the models over HTTP,

@@ -1,0 +1,13 @@
+//! egoexo-cli's integration tests in one binary, a module per area. Every test binary links
+//! the whole dependency tree, so one binary instead of one per file saves those links in a
+//! clean build, and the areas' tests run side by side (docs/performance.md).
+
+mod common;
+mod detect;
+mod live;
+mod mocap;
+mod participants;
+mod pipeline;
+mod register;
+mod serve;
+mod sessions;

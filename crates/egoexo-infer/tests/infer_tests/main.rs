@@ -1,0 +1,12 @@
+//! egoexo-infer's integration tests in one binary, a module per area. Every test binary links
+//! the whole dependency tree, so one binary instead of one per file saves those links in a
+//! clean build, and the areas' tests run side by side (docs/performance.md).
+
+mod common;
+mod cost;
+mod detector;
+mod engine;
+mod live_models;
+mod parity;
+mod passes;
+mod training_python;

@@ -1,6 +1,4 @@
-//! egoexo-cli's integration tests in one binary, a module per area. Every test binary links
-//! the whole dependency tree, so one binary instead of one per file saves those links in a
-//! clean build, and the areas' tests run side by side (docs/performance.md).
+//! egoexo-cli's integration tests: one binary, a module per area (docs/style.md).
 
 mod common;
 mod detect;

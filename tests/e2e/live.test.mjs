@@ -69,8 +69,11 @@ async function waitFor(app, predicate, what, timeout = 60_000) {
   }
 }
 
+// Seconds the first test's replay streams.
+const REPLAY_S = 30;
+
 describe('live capture', () => {
-  test('a replayed session streams into the page, is drawn live, and is kept frame for frame', async () => {
+  test('a replayed session streams into the page, is drawn live, and is kept frame for frame', async (t) => {
     const app = await openApp(browser(), '?backend=webgl2');
     assert.equal(await app.waitState(['idle', 'error']), 'idle', await app.text('#error-message'));
     await app.page.getByRole('button', { name: 'Go live' }).click();
@@ -80,26 +83,41 @@ describe('live capture', () => {
     await app.waitState('live');
 
     const replay = egoexoJson([
-      // 20 s: long enough that every check below runs while it streams, even on a loaded machine.
-      'live', 'replay', SAMPLE, '--url', APP_URL, '--room', code, '--duration-s', '20',
+      // The checks that need the stream run in its first seconds: alone on an idle machine the
+      // late viewer drew 12–25 s in. (Beside another browser file — the bad-input file's pool
+      // of workers — the page showed its 20th frame 7–19 s in, and the late viewer had not
+      // drawn 24–39 s in: this file runs alone, `e2e::RUN_ALONE`.)
+      'live', 'replay', SAMPLE, '--url', APP_URL, '--room', code, '--duration-s', String(REPLAY_S),
       '--disconnect', 'observer-1@4+2', '--disconnect', 'observer-2@4+2', '--clock-jump', 'wearer@7+3',
     ]);
-    // The skeleton moves.
-    const early = await waitFor(app, (l) => l.frames >= 20 && l.root, 'the first live frames');
-    const later = await waitFor(app, (l) => l.frames >= early.frames + 45, 'more live frames');
-    const moved = Math.hypot(...later.root.map((v, i) => v - early.root[i]));
-    assert.ok(moved > 0.02, `the root moved ${moved} m`);
-    // Each device at a plausible rate (the sample's streams are 30 Hz). The observers drop out
-    // for 2 s at 4 s, which lowers their rate for a while after: on a loaded machine the first
-    // snapshot with every rate can fall there, so the rates are waited for, not taken at once.
-    const plausible = (d) => d.rates_hz.length > 0 && d.rates_hz.every(([, hz]) => hz > 15 && hz < 45);
-    const streaming = await waitFor(app, (l) => l.devices.length === 3 && l.devices.every(plausible), 'plausible rates');
-    for (const device of streaming.devices) {
-      for (const [stream, hz] of device.rates_hz) assert.ok(hz > 15 && hz < 45, `${device.device} ${stream} at ${hz} Hz`);
-    }
-    const png = decodePng(await app.page.locator('#view').screenshot());
-    const pixels = skeletonPixels(png.rgba);
-    assert.ok(pixels.left > 30 && pixels.right > 30, `skeleton pixels ${JSON.stringify(pixels)}`);
+    let replayEnded = false;
+    replay.then(() => { replayEnded = true; }, () => { replayEnded = true; });
+    const started = Date.now();
+    const since = () => `${((Date.now() - started) / 1000).toFixed(1)} s`;
+    // Every snapshot while it streams: the rates are judged on the whole stream, not on the one
+    // snapshot a loaded machine happens to take (the observers drop out for 2 s at 4 s, which
+    // lowers their rates for a while after).
+    const seen = [];
+    const watching = (async () => {
+      while (!replayEnded) {
+        try {
+          seen.push(await live(app));
+        } catch {
+          return; // the page closed: the test has failed already
+        }
+        await new Promise((r) => setTimeout(r, 250));
+      }
+    })();
+    // What needs the stream comes first, while it still streams (on a loaded machine the page
+    // shows one frame in three and every step takes longer): each says so if the replay ended.
+    const streaming = (what) => (l) => {
+      if (replayEnded) throw new Error(`the replay ended (${since()} in) before ${what}: ${JSON.stringify(l.take)}`);
+      return true;
+    };
+    const early = await waitFor(app, (l) => streaming('the first live frames')(l) && l.frames >= 20 && l.root, 'the first live frames');
+    t.diagnostic(`20 frames shown ${since()} into the replay`);
+    // A late viewer opens the watch link now; it loads the app while the checks below run.
+    const watcherOpened = openApp(browser(), `?backend=webgl2${new URL(watchLink).hash}`);
 
     // A malformed client is closed; the page carries on.
     // (a device that joins properly, then sends a frame 5 bytes long)
@@ -114,13 +132,28 @@ describe('live capture', () => {
     }), [`${APP_URL.replace(/^http/, 'ws').replace(/\/$/, '')}/live`, code]);
     assert.equal(closed.code, 1007, JSON.stringify(closed));
     const carriedOn = (await live(app)).frames;
-    await waitFor(app, (l) => l.frames > carriedOn + 10, 'frames after the malformed client');
+    await waitFor(app, (l) => streaming('frames after the malformed client')(l) && l.frames > carriedOn + 10, 'frames after the malformed client');
+    t.diagnostic(`frames after the malformed client ${since()} into the replay`);
 
-    // A late viewer by the watch link draws at once (it receives the last 3.2 s).
-    const watcher = await openApp(browser(), `?backend=webgl2${new URL(watchLink).hash}`);
-    await waitFor(watcher, (l) => l.frames >= 2, 'the late viewer drawing');
+    // The late viewer draws at once (it receives the last 3.2 s).
+    const watcher = await watcherOpened;
+    await waitFor(watcher, (l) => streaming('the late viewer drew')(l) && l.frames >= 2, 'the late viewer drawing');
+    t.diagnostic(`the late viewer drew ${since()} into the replay`);
+
+    // The skeleton moves.
+    const later = await waitFor(app, (l) => streaming('45 more frames')(l) && l.frames >= early.frames + 45, 'more live frames');
+    const moved = Math.hypot(...later.root.map((v, i) => v - early.root[i]));
+    assert.ok(moved > 0.02, `the root moved ${moved} m`);
+    const png = decodePng(await app.page.locator('#view').screenshot());
+    const pixels = skeletonPixels(png.rgba);
+    assert.ok(pixels.left > 30 && pixels.right > 30, `skeleton pixels ${JSON.stringify(pixels)}`);
 
     const sent = await replay;
+    await watching;
+    // Each device at a plausible rate while it streamed (the sample's streams are 30 Hz).
+    const plausible = (d) => d.rates_hz.length > 0 && d.rates_hz.every(([, hz]) => hz > 15 && hz < 45);
+    const allPlausible = seen.find((l) => ['wearer', 'observer-1', 'observer-2'].every((id) => l.devices.some((d) => d.device === id && plausible(d))));
+    assert.ok(allPlausible, `no snapshot of ${seen.length} had every device at a plausible rate; the last with three: ${JSON.stringify(seen.findLast((l) => l.devices.length >= 3)?.devices.map((d) => [d.device, d.rates_hz]))}`);
     // Every device listed with a plausible rate, clock offset and latency.
     const status = await waitFor(app, (l) => l.take && l.devices.length === 4, 'the devices');
     for (const id of ['wearer', 'observer-1', 'observer-2']) {
@@ -156,7 +189,7 @@ describe('live capture', () => {
     }
     assert.equal((await live(app)).dropped, 0);
     const summary = await app.page.evaluate(() => window.egoexo.session);
-    assert.ok(summary.frames >= 595 && summary.frames <= 605, `${summary.frames} frames for 20 s`);
+    assert.ok(Math.abs(summary.frames - 30 * REPLAY_S) <= 5, `${summary.frames} frames for ${REPLAY_S} s`);
     assert.equal(summary.observers.length, 2);
     // … and saves as a .egoexo session with every device.
     const [download] = await Promise.all([app.page.waitForEvent('download'), app.page.getByRole('button', { name: 'Save .egoexo' }).click()]);
@@ -215,11 +248,12 @@ describe('live capture', () => {
       assert.match(await app.text('#live-devices'), /registered: yaw -?\d+\.\d°/);
       // The re-centred observer is seen to jump, left out, and registered again.
       const jumped = await waitFor(app, (l) => (l.lastFrame?.observer_worlds ?? []).some((o) => o.observer === 'observer-1' && o.jumps === 1), 'the jump seen', 60_000);
-      // Not before the re-centring: frames are on the relay's clock, to which each device's clock
-      // is mapped through pings, so a loaded machine's round trips put the jump a few frames
-      // either side of 12 s (seen: frame 356 with two browser test files at once).
+      // Not before the re-centring: the frame shown is the lookahead (4 frames) behind the newest
+      // head pose, and frames are on the relay's clock, to which each device's clock is mapped
+      // through pings, so a loaded machine's round trips put the jump several frames either
+      // side of 12 s (seen: frame 356 with two browser test files at once).
       const jumpedFrame = jumped.lastFrame.frame;
-      assert.ok(jumpedFrame / 30 >= 12 - 0.25, `a jump seen at frame ${jumpedFrame}`);
+      assert.ok(jumpedFrame / 30 >= 12 - 0.5, `a jump seen at frame ${jumpedFrame}`);
       const again = await waitFor(app, (l) => (l.lastFrame?.observer_worlds ?? []).some((o) => o.observer === 'observer-1' && o.jumps === 1 && o.state === 'registered'), 'registered again', 60_000);
       t.diagnostic(`observer-1 re-centred at 12 s, registered again by ${(again.lastFrame.frame / 30).toFixed(1)} s`);
       // The registration is the truth the replay drew (yaw, and the translation at the origin):

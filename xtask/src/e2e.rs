@@ -50,12 +50,15 @@ impl BrowserRun {
 
 /// The browser test files that run one after the other once the rest are done, with no other
 /// browser beside them: those that measure (time to first skeleton; the hour-long session's
-/// rate and memory), so that their figures are comparable from run to run, and the observer
-/// page's, whose camera films in real time. Chromium's file camera plays its film slower than
-/// real time when starved of CPU (measured beside `live.test.mjs`: 0.1 s behind after 20 s)
-/// while the wearer's replay keeps time, and the views it stamps no longer match the wearer
-/// (a real camera is a device of its own; in CI a second browser made it miss registration).
-pub const RUN_ALONE: &[&str] = &["hour.test.mjs", "observe.test.mjs", "startup.test.mjs"];
+/// rate and memory), so that their figures are comparable from run to run, and those that
+/// stream in real time — the live room's and the observer page's. Beside another browser file
+/// on this 2-core machine (the bad-input file's pool of workers) the live page showed its 20th
+/// frame 7–19 s into a 20 s replay and a late viewer had not drawn by its end, so the checks
+/// that need the stream ran after it. Chromium's file camera plays its film slower than real
+/// time when starved of CPU (measured beside `live.test.mjs`: 0.1 s behind after 20 s) while
+/// the wearer's replay keeps time, and the views it stamps no longer match the wearer (a real
+/// camera is a device of its own; in CI a second browser made it miss registration).
+pub const RUN_ALONE: &[&str] = &["hour.test.mjs", "live.test.mjs", "observe.test.mjs", "startup.test.mjs"];
 
 /// How many of the other test files run at once. Each lane has its own server (its own share
 /// store and per-client rate limits: every test connects from 127.0.0.1) and runs its files one
@@ -119,6 +122,11 @@ pub fn run_suite(root: &Path, run: &BrowserRun) -> Result<TestCounts> {
         }
     }
     if !failed_files.is_empty() {
+        // Again at the end, where a CI log's tail shows it: why each failing file failed.
+        for name in &failed_files {
+            let report = std::fs::read_to_string(reports.join(format!("{name}.spec"))).unwrap_or_default();
+            eprintln!("--- {name}: {}", failures_of(&report));
+        }
         bail!(
             "the browser end-to-end tests failed ({} passed, {} failed; in {})",
             counts.passed,
@@ -130,6 +138,21 @@ pub fn run_suite(root: &Path, run: &BrowserRun) -> Result<TestCounts> {
         bail!("the browser end-to-end tests ran no test");
     }
     Ok(counts)
+}
+
+/// The failing tests of a spec report (Node's closing "failing tests" section), at most 6,000
+/// characters of it; the report's last lines when it has none (the file did not finish).
+fn failures_of(spec: &str) -> String {
+    const MAX_CHARS: usize = 6000;
+    let section = match spec.rfind("failing tests:") {
+        Some(at) => &spec[at..],
+        None => &spec[spec.len() - spec.chars().rev().take(MAX_CHARS).map(char::len_utf8).sum::<usize>()..],
+    };
+    let mut shown: String = section.chars().take(MAX_CHARS).collect();
+    if shown.len() < section.len() {
+        shown.push_str(" …");
+    }
+    shown
 }
 
 /// `tests/e2e/*.test.mjs` by name: (those in [`RUN_ALONE`], the others).
@@ -156,9 +179,9 @@ struct FileOutcome {
     counts: TestCounts,
 }
 
-/// Runs one test file against the server at `url`. In a lane (`print` given) its spec report
-/// goes to `reports/` and is printed whole, under `print`, when the file ends; alone, it is
-/// printed as it runs.
+/// Runs one test file against the server at `url`. Its spec and TAP reports go to `reports/`;
+/// in a lane (`print` given) the spec report is printed whole, under `print`, when the file
+/// ends; alone, it is also printed as it runs.
 fn run_file(
     root: &Path,
     run: &BrowserRun,
@@ -171,14 +194,11 @@ fn run_file(
     let tap = reports.join(format!("{name}.tap"));
     let spec = reports.join(format!("{name}.spec"));
     let mut c = run.node(root, url);
-    c.args(["--test", "--test-reporter=spec"])
-        .arg(format!(
-            "--test-reporter-destination={}",
-            if print.is_some() { spec.display().to_string() } else { "stdout".into() }
-        ))
-        .arg("--test-reporter=tap")
-        .arg(format!("--test-reporter-destination={}", tap.display()))
-        .arg(file);
+    c.args(["--test", "--test-reporter=spec"]).arg(format!("--test-reporter-destination={}", spec.display()));
+    if print.is_none() {
+        c.args(["--test-reporter=spec", "--test-reporter-destination=stdout"]);
+    }
+    c.arg("--test-reporter=tap").arg(format!("--test-reporter-destination={}", tap.display())).arg(file);
     let started = std::time::Instant::now();
     if print.is_none() {
         eprintln!("$ node --test {name} (alone, app at {url})");
@@ -354,7 +374,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_measuring_files_run_alone_and_the_rest_in_lanes() {
+    fn the_measuring_and_real_time_files_run_alone_and_the_rest_in_lanes() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("tests").join("e2e");
         let (alone, shared) = test_files(&dir).unwrap();
         let names = |files: &[PathBuf]| -> Vec<String> {
@@ -362,7 +382,7 @@ mod tests {
         };
         assert_eq!(names(&alone), RUN_ALONE);
         let shared = names(&shared);
-        assert!(shared.contains(&"live.test.mjs".to_string()), "{shared:?}");
+        assert!(shared.contains(&"app.test.mjs".to_string()), "{shared:?}");
         assert!(shared.iter().all(|n| n.ends_with(".test.mjs") && !RUN_ALONE.contains(&n.as_str())), "{shared:?}");
         // A name that is not there is refused, not skipped.
         let empty = std::env::temp_dir().join(format!("egoexo-e2e-empty-{}", std::process::id()));
@@ -370,6 +390,19 @@ mod tests {
         let error = test_files(&empty).unwrap_err().to_string();
         std::fs::remove_dir_all(&empty).unwrap();
         assert!(error.contains("hour.test.mjs"), "{error}");
+    }
+
+    #[test]
+    fn a_failing_file_is_summed_up_by_its_failing_tests_or_its_last_lines() {
+        let spec =
+            "▶ live\n  ✔ one (1ms)\n  ✖ two (2ms)\n✖ failing tests:\n\ntest at x.mjs:3:1\n✖ two (2ms)\n  Error: é\n";
+        assert_eq!(failures_of(spec), "failing tests:\n\ntest at x.mjs:3:1\n✖ two (2ms)\n  Error: é\n");
+        // A file that did not finish: its last lines, cut on a character boundary.
+        let long = format!("{}é tail", "ø".repeat(7000));
+        let shown = failures_of(&long);
+        assert!(shown.ends_with("é tail") && shown.chars().count() == 6000, "{}", shown.chars().count());
+        let sectioned = format!("failing tests:\n{}", "x".repeat(7000));
+        assert!(failures_of(&sectioned).ends_with("x …"));
     }
 
     #[test]

@@ -60,6 +60,17 @@ pub const MAX_LOOKAHEAD: usize = WINDOW - 1;
 /// Seconds of interpolation margin read around a window from the take.
 const MARGIN_NS: i64 = 200_000_000;
 
+/// How far back from the frame shown (grid frames: 133 ms at 30 Hz) an observer's keypoints
+/// make the window ego-exo. A camera's keypoints reach the relay later than the wearer's head
+/// pose of the same instant (a browser camera: ~100 ms of detection on a 2-core machine and
+/// ~150 ms to the relay), often later than the lookahead: requiring keypoints of the very frame
+/// shown left such a camera registered and never fused (CI, 2026-12-07). The fusion network
+/// reads the window's newest frames without keypoints as masked, as it does any frame an
+/// observer misses. Measured (`worker_tests`, lookahead 8 = 267 ms, mean joint error against
+/// the truth, ego-only 9.8 cm): keypoints ≤ 267 ms late 8.4 cm; 300 ms 8.9; 350 ms 9.6; 400 ms
+/// 9.8; 600 ms 9.9 with a one-second span — so later than this span the window is ego-only.
+pub const RECENT_EXO_FRAMES: usize = 4;
+
 /// One frame to draw.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LiveFrame {
@@ -71,13 +82,14 @@ pub struct LiveFrame {
     pub window: Range<usize>,
     /// The viewer's scene of this one frame (`egoexo_scene::SceneData` as JSON).
     pub scene_json: Vec<u8>,
-    /// The method that made it: ego-exo, or ego-only when no observer has keypoints of this
-    /// frame.
+    /// The method that made it: ego-exo, or ego-only when no observer has keypoints within
+    /// [`RECENT_EXO_FRAMES`] of this frame (or after it, within the window).
     pub method: Method,
     /// Whether the networks were a live variant trained for the reconstructor's lookahead
     /// (else the offline ones).
     pub trained_for_lookahead: bool,
-    /// Observers that contributed a ray with gate ≥ 0.5 to this frame.
+    /// Observers that contributed a ray with gate ≥ 0.5 to the window within
+    /// [`RECENT_EXO_FRAMES`] of this frame (or after it).
     pub exo_observers: Vec<String>,
     /// Whether the wearer's head was tracked at this frame.
     pub tracked: bool,
@@ -280,10 +292,11 @@ impl LiveReconstructor {
             scene = scene.with_others(&others);
         }
         scene.check().map_err(LiveError::Scene)?;
+        let recent = recent_frames(index, end + 1 - start);
         let exo_observers = recon
             .gates
             .iter()
-            .filter(|g| g.gates.get(index).is_some_and(|k| k.iter().any(|&v| v >= 0.5)))
+            .filter(|g| g.gates.get(recent.clone()).is_some_and(|f| f.iter().flatten().any(|&v| v >= 0.5)))
             .map(|g| g.observer_id.clone())
             .collect();
         self.shown += 1;
@@ -310,10 +323,12 @@ fn reconstruct_frame(
     aligned: &egoexo_core::aligned::AlignedSession,
     index: usize,
 ) -> Result<(egoexo_infer::Reconstruction, egoexo_scene::SceneData), LiveError> {
-    // Ego-exo when an observer has keypoints of this very frame; otherwise (none connected,
-    // none streaming, or the wearer out of every view) the ego-only network, which was
-    // trained without observers.
-    let has_exo = aligned.observers.iter().any(|o| o.keypoints[index].iter().any(Option::is_some));
+    // Ego-exo when an observer has keypoints of a recent frame (`RECENT_EXO_FRAMES`);
+    // otherwise (none connected, none streaming, or the wearer out of every view) the ego-only
+    // network, which was trained without observers.
+    let recent = recent_frames(index, aligned.timeline.frames);
+    let has_exo =
+        aligned.observers.iter().any(|o| o.keypoints[recent.clone()].iter().any(|k| k.iter().any(Option::is_some)));
     let method = if has_exo { Method::EgoExo } else { Method::EgoOnly };
     // Tracking as for a recording (`tracking: None`, `AlignedSession::tracking_mode`): 3-point
     // whenever a wrist device is connected; the network reads, frame by frame, which wrists
@@ -325,6 +340,12 @@ fn reconstruct_frame(
     let mut scene = crate::scene::build_scene(&aligned.frames_slice(one.clone()), &recon.frames_slice(one), None);
     scene.floor_y = crate::scene::floor_y(&recon.joints, &recon.valid);
     Ok((recon, scene))
+}
+
+/// The frames of a window of `frames` whose observers' keypoints count for frame `index`: from
+/// [`RECENT_EXO_FRAMES`] before it to the window's end.
+fn recent_frames(index: usize, frames: usize) -> Range<usize> {
+    index.saturating_sub(RECENT_EXO_FRAMES)..frames
 }
 
 /// What `take` holds, for the page (`shown` / `skipped`: live frames so far).

@@ -66,9 +66,12 @@ const MARGIN_NS: i64 = 200_000_000;
 /// ~150 ms to the relay), often later than the lookahead: requiring keypoints of the very frame
 /// shown left such a camera registered and never fused (CI, 2026-12-07). The fusion network
 /// reads the window's newest frames without keypoints as masked, as it does any frame an
-/// observer misses. Measured (`worker_tests`, lookahead 8 = 267 ms, mean joint error against
-/// the truth, ego-only 9.8 cm): keypoints ≤ 267 ms late 8.4 cm; 300 ms 8.9; 350 ms 9.6; 400 ms
-/// 9.8; 600 ms 9.9 with a one-second span — so later than this span the window is ego-only.
+/// observer misses. Measured (`worker_tests`, 12 s wander, 2 observers, lookahead 8 = 267 ms,
+/// MPJPE against the truth, ego-only 10.14 cm): keypoints 0 / 200 / 300 / 350 / 400 / 600 ms
+/// late 8.79 / 8.84 / 9.36 / 9.98 / 10.21 / 10.14 cm (600 ms: ego-only). Rays much older than
+/// the frame shown stop helping (with a one-second span, 600 ms late was worse than ego-only),
+/// hence 4 frames; 3 would avoid the 0.07 cm lost at 400 ms but leave out a browser camera
+/// ~120 ms past lookahead 4.
 pub const RECENT_EXO_FRAMES: usize = 4;
 
 /// One frame to draw.

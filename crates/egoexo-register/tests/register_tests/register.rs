@@ -23,7 +23,8 @@ use egoexo_synth::worlds::{
 };
 use egoexo_synth::{SynthConfig, simulate};
 
-fn engine() -> Engine {
+/// The shipped 1-point networks (the coarse body a static camera's registration needs).
+pub(crate) fn engine() -> Engine {
     let dir = egoexo_test_support::workspace_root().join("models");
     let manifest = Manifest::from_json(&std::fs::read(dir.join("manifest.json")).unwrap()).unwrap();
     let set = ModelSet::load(manifest.model_set(TrackingMode::OnePoint).unwrap(), |file| {

@@ -218,18 +218,28 @@ impl<'a> Problem<'a> {
             return None;
         }
         let view = edge.view;
-        let sigma_point = point.sigma_m / distance;
-        let sigma = (view.sigma_detector_rad.powi(2) + sigma_point.powi(2)).sqrt();
+        let mut sigma_point = point.sigma_m / distance;
+        // With an estimated focal, the residual is the image error in the starting focal's
+        // normalised units (pixels / f₀), whatever focal the state has: the detector's noise is
+        // in pixels. (Measured in the state's own normalised units, the errors shrink as the
+        // focal grows, and a camera infinitely far away with an infinitely long lens fits every
+        // view perfectly.) `focal_column`: dr/d(log focal).
+        let mut focal_column = [0.0; 2];
         // r = g(q); dr/dq as two rows.
         let (r, dr_dq, angle) = if view.focal_estimated.is_some() {
             if q.z < 0.1 * distance {
                 return None;
             }
-            let scale = (-a.log_focal).exp();
-            let (xn, yn) = (o.normalised[0] * scale, o.normalised[1] * scale);
-            let r = [q.x / q.z - xn, q.y / q.z - yn];
-            let rows = [V3::new(1.0 / q.z, 0.0, -q.x / (q.z * q.z)), V3::new(0.0, 1.0 / q.z, -q.y / (q.z * q.z))];
-            let bearing = V3::new(xn, yn, 1.0).normalize();
+            let zoom = a.log_focal.exp();
+            let (x, y) = (q.x / q.z, q.y / q.z);
+            let r = [zoom * x - o.normalised[0], zoom * y - o.normalised[1]];
+            focal_column = [zoom * x, zoom * y];
+            sigma_point *= zoom;
+            let rows = [
+                V3::new(zoom / q.z, 0.0, -zoom * q.x / (q.z * q.z)),
+                V3::new(0.0, zoom / q.z, -zoom * q.y / (q.z * q.z)),
+            ];
+            let bearing = V3::new(o.normalised[0] / zoom, o.normalised[1] / zoom, 1.0).normalize();
             (r, rows, (q / distance).dot(&bearing).clamp(-1.0, 1.0).acos())
         } else {
             let p = o.basis * q;
@@ -243,6 +253,7 @@ impl<'a> Problem<'a> {
             ];
             (r, rows, (p.z / distance).clamp(-1.0, 1.0).acos())
         };
+        let sigma = (view.sigma_detector_rad.powi(2) + sigma_point.powi(2)).sqrt();
         let mut columns = Vec::new();
         if with_jacobian {
             let push = |columns: &mut Vec<(usize, [f64; 2])>, col: usize, dq: V3| {
@@ -268,8 +279,7 @@ impl<'a> Problem<'a> {
                     push(&mut columns, c, rc_t * ra_t * b.rotation * point.velocity);
                 }
                 if let Some(fc) = focal {
-                    let scale = (-a.log_focal).exp();
-                    columns.push((fc, [o.normalised[0] * scale, o.normalised[1] * scale]));
+                    columns.push((fc, focal_column));
                 }
             }
             if let Some((rot, t, clock, _)) = self.columns_of(edge.target) {

@@ -315,13 +315,6 @@ pub enum WorldState {
     Registered,
 }
 
-impl WorldState {
-    /// From the worker's `observer_worlds` state (`"registered"`, anything else registering).
-    pub fn from_name(name: &str) -> Self {
-        if name == "registered" { WorldState::Registered } else { WorldState::Registering }
-    }
-}
-
 /// One channel of the room, as viewers see it.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ChannelInfo {

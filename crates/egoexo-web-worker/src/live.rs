@@ -149,10 +149,9 @@ impl LiveReconstructor {
                 LiveObserverWorld {
                     observer: id.clone(),
                     state: match o.state {
-                        RollingState::Registering => "registering",
-                        RollingState::Registered => "registered",
-                    }
-                    .into(),
+                        RollingState::Registering => WorldState::Registering,
+                        RollingState::Registered => WorldState::Registered,
+                    },
                     views_s: o.views_s,
                     registered_after_s: o.registered_after_s(),
                     yaw_deg: r.map(|r| r.yaw_deg),
@@ -402,7 +401,7 @@ impl WorldReports {
     pub fn due(&mut self, worlds: &[LiveObserverWorld], now_ms: f64) -> Vec<ClientMessage> {
         let mut due = Vec::new();
         for world in worlds {
-            let state = WorldState::from_name(&world.state);
+            let state = world.state;
             let message: String = world.message.chars().take(MAX_WORLD_MESSAGE_CHARS).collect();
             let send = self.sent.get(&world.observer).is_none_or(|(sent_state, sent_message, at)| {
                 let since_ms = now_ms - at;
@@ -426,10 +425,10 @@ mod tests {
 
     use super::WorldReports;
 
-    fn world(observer: &str, state: &str, message: &str) -> LiveObserverWorld {
+    fn world(observer: &str, state: WorldState, message: &str) -> LiveObserverWorld {
         LiveObserverWorld {
             observer: observer.into(),
-            state: state.into(),
+            state,
             views_s: 0.0,
             registered_after_s: None,
             yaw_deg: None,
@@ -454,7 +453,7 @@ mod tests {
     #[test]
     fn observers_hear_a_new_state_at_once_a_new_message_each_second_and_the_same_every_five() {
         let mut reports = WorldReports::default();
-        let registering = |s: u32| world("tripod", "registering", &format!("registering — {s} s of views"));
+        let registering = |s: u32| world("tripod", WorldState::Registering, &format!("registering — {s} s of views"));
         assert_eq!(said(reports.due(&[registering(3)], 0.0)).len(), 1);
         // The message changes every frame; it goes out once a second.
         assert!(reports.due(&[registering(3)], 100.0).is_empty());
@@ -464,12 +463,12 @@ mod tests {
             [("tripod".to_string(), WorldState::Registering, "registering — 4 s of views".to_string())]
         );
         // A new state at once; the same state and message again after 5 s.
-        let registered = world("tripod", "registered", "registered after 4.2 s of views");
+        let registered = world("tripod", WorldState::Registered, "registered after 4.2 s of views");
         assert_eq!(said(reports.due(std::slice::from_ref(&registered), 1_010.0))[0].1, WorldState::Registered);
         assert!(reports.due(std::slice::from_ref(&registered), 6_000.0).is_empty());
         assert_eq!(reports.due(std::slice::from_ref(&registered), 6_010.0).len(), 1);
         // Each observer on its own; a message over the limit is cut to it.
-        let long = world("phone", "registering", &"x".repeat(1_000));
+        let long = world("phone", WorldState::Registering, &"x".repeat(1_000));
         let out = said(reports.due(&[registered, long], 6_020.0));
         assert_eq!(out.len(), 1);
         assert_eq!(out[0].2.chars().count(), egoexo_protocol::live::MAX_WORLD_MESSAGE_CHARS);

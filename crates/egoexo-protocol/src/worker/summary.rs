@@ -5,6 +5,8 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use crate::live::WorldState;
+
 /// What a live take holds.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct LiveTakeSummary {
@@ -66,8 +68,8 @@ pub struct LiveFrameInfo {
 pub struct LiveObserverWorld {
     pub observer: String,
     /// `registering` (not fused: the wearer is reconstructed without it) or `registered`
-    /// (fused).
-    pub state: String,
+    /// (fused): the word the relay passes on to the observer ([`WorldState`]).
+    pub state: WorldState,
     /// Seconds of its views (frames with keypoints) in its current world so far.
     pub views_s: f64,
     /// Seconds from its first view to its registration (relay clock).

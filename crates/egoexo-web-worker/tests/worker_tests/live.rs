@@ -9,6 +9,7 @@ use crate::common::*;
 use egoexo_infer::{InferError, Method};
 use egoexo_protocol::live::{
     ChannelInfo, DataFrame, DeviceHello, DeviceMount, DeviceRole, DeviceWorld, FramePayload, RelayMessage, Stream,
+    WorldState,
 };
 use egoexo_scene::SceneData;
 use egoexo_session::{FileTree, ImportOptions, Limits, Session, import_session};
@@ -337,8 +338,9 @@ fn observers_in_worlds_of_their_own_are_registered_while_they_stream_then_fused_
     let shown = stream_live(&mut worker, &messages, &frames);
     assert_eq!(shown.len(), reference.len());
     let first_ns = shared.wearer.head.timestamps_ns[0];
-    let registered =
-        |f: &LiveFrame| f.observer_worlds.len() == 2 && f.observer_worlds.iter().all(|o| o.state == "registered");
+    let registered = |f: &LiveFrame| {
+        f.observer_worlds.len() == 2 && f.observer_worlds.iter().all(|o| o.state == WorldState::Registered)
+    };
     let span_s = (shared.wearer.head.timestamps_ns.last().unwrap() - first_ns) as f64 / 1e9;
     let Some(at) = shown.iter().position(registered) else {
         panic!("not registered in {span_s:.1} s: {:#?}", shown.last().unwrap().observer_worlds)
@@ -353,7 +355,11 @@ fn observers_in_worlds_of_their_own_are_registered_while_they_stream_then_fused_
     // Until then the own worlds are not fused: every frame is the wearer alone.
     for f in &shown[..at] {
         assert!(f.exo_observers.is_empty(), "frame {} fused {:?} before registration", f.frame, f.exo_observers);
-        assert!(f.observer_worlds.iter().all(|o| o.state == "registering" && o.message.starts_with("registering")));
+        assert!(
+            f.observer_worlds
+                .iter()
+                .all(|o| o.state == WorldState::Registering && o.message.starts_with("registering"))
+        );
     }
     // The registration is the truth within its uncertainty (and the goal's 1°, 3 cm).
     for (o, t) in shown.last().unwrap().observer_worlds.iter().zip(&truth) {
@@ -409,7 +415,8 @@ fn a_static_camera_without_a_pose_streams_keypoints_only_and_is_registered_in_si
     let shown = stream_live(&mut worker, &messages, &frames);
     assert_eq!(shown.len(), reference.len());
     let first_ns = posed.wearer.head.timestamps_ns[0];
-    let Some(at) = shown.iter().position(|f| f.observer_worlds.iter().any(|o| o.state == "registered")) else {
+    let Some(at) = shown.iter().position(|f| f.observer_worlds.iter().any(|o| o.state == WorldState::Registered))
+    else {
         panic!("not registered: {:#?}", shown.last().unwrap().observer_worlds)
     };
     let after_s = (shown[at].timestamp_ns - first_ns) as f64 / 1e9;

@@ -11,6 +11,16 @@ use crate::scene::{FrameDrawList, SolidInstance};
 
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth24Plus;
 
+/// The joints' and bones' tessellation: 256 triangles a sphere, 12 sides a cylinder — a joint
+/// is 5–40 px across in the views the viewer frames, where these read as round. Every sphere
+/// and bone of every body is drawn once or twice (translucent ones with a depth pass), so their
+/// triangles are most of a frame's work where the GPU is the CPU (SwiftShader: 14 × 24 spheres
+/// and 24 sides cost 0.8–0.9 s of CPU a draw with 4× MSAA at 944 × 570, 6 × 10 and 8 sides 0.26–
+/// 0.31 s; docs/performance.md).
+const SPHERE_RINGS: u16 = 8;
+const SPHERE_SEGMENTS: u16 = 16;
+const CYLINDER_SEGMENTS: u16 = 12;
+
 /// Uniforms shared by every pipeline (layout of `Globals` in `viewer.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -320,8 +330,8 @@ impl Renderer {
             globals,
             bind_group,
             pipelines,
-            sphere: GpuMesh::new(device, &mesh::unit_sphere(14, 24), "sphere"),
-            cylinder: GpuMesh::new(device, &mesh::unit_cylinder(24), "cylinder"),
+            sphere: GpuMesh::new(device, &mesh::unit_sphere(SPHERE_RINGS, SPHERE_SEGMENTS), "sphere"),
+            cylinder: GpuMesh::new(device, &mesh::unit_cylinder(CYLINDER_SEGMENTS), "cylinder"),
             instances: GrowableBuffer::new(device, "instances"),
             lines: GrowableBuffer::new(device, "lines"),
             line_vertex_count: 0,

@@ -13,7 +13,7 @@ use egoexo_register::{RegisterSettings, register_session};
 use egoexo_session::Session;
 use egoexo_session::placement::WorldRef;
 use egoexo_synth::procedural::wandering;
-use egoexo_synth::worlds::{WorldPerturbation, WorldTruth, perturb_observer_worlds, unpose_static_cameras};
+use egoexo_synth::worlds::{WorldPerturbation, perturb_observer_worlds, unpose_static_cameras};
 use egoexo_synth::{SynthConfig, simulate};
 
 fn session(seconds: f32, observers: usize, seed: u64) -> Session {
@@ -224,13 +224,6 @@ fn rarely_and_noisily_seen(seed: u64) -> Session {
     s
 }
 
-/// How far (metres) `found` puts the middle of the wearer's path from where `truth` does.
-fn off_at_the_scene(s: &Session, found: &egoexo_solve::registration::Registration, truth: &WorldTruth) -> f64 {
-    let poses = &s.wearer.head.poses;
-    let scene = poses.iter().map(|p| p.translation).sum::<Vec3>() / poses.len() as f32;
-    f64::from(found.transform.transform_point(truth.t_session_world.inverse().transform_point(scene)).distance(scene))
-}
-
 /// With its focal length estimated, a camera does not run off to infinity behind a long lens
 /// (where every view's error shrank to nothing before the residuals were measured in pixels:
 /// these windows were placed 10⁴–10⁶ m away, σ undetermined): the first 12, 16 and 20 s of
@@ -246,7 +239,8 @@ fn a_camera_of_unknown_focal_length_is_never_placed_at_infinity() {
         let mut w = window(&s, first, first + seconds * 1_000_000_000);
         let report = register_session(Some(&engine), TrackingMode::OnePoint, &mut w, &settings).unwrap();
         let r = report.observers[0].registration.as_ref().unwrap();
-        let off = off_at_the_scene(&s, r, &truth[0]);
+        let (_, off) = crate::register::error(&r.transform, &truth[0], crate::register::scene_centre(&s));
+        let off = f64::from(off);
         let sigma = r.sigma_translation_m.unwrap_or(f64::NAN);
         assert!(
             sigma.is_finite() && off <= 3.0 * sigma.max(0.05),

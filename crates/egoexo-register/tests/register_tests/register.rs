@@ -47,13 +47,16 @@ fn settings(mode: RegisterMode) -> RegisterSettings {
 /// Rotation error (degrees) of a registration against the truth, and its translation error
 /// where it matters: at `scene` (session world, metres; the wearer's mean head position),
 /// mapped from the observer's world by both.
-fn error(found: &RigidTransform, truth: &WorldTruth, scene: Vec3) -> (f32, f32) {
+/// A registration's error against the truth: its rotation (degrees) and how far (metres) it
+/// puts `scene` (in the session's world) from where the truth does.
+pub(crate) fn error(found: &RigidTransform, truth: &WorldTruth, scene: Vec3) -> (f32, f32) {
     let yaw = found.rotation.angle_between(truth.t_session_world.rotation).to_degrees();
     let own = truth.t_session_world.inverse().transform_point(scene);
     (yaw, found.transform_point(own).distance(scene))
 }
 
-fn scene_centre(s: &Session) -> Vec3 {
+/// The middle of the wearer's path.
+pub(crate) fn scene_centre(s: &Session) -> Vec3 {
     let poses = &s.wearer.head.poses;
     poses.iter().map(|p| p.translation).sum::<Vec3>() / poses.len() as f32
 }

@@ -17,6 +17,13 @@ export function startReconstruction() {
   state.client.reconstruct(true);
 }
 
+// The user's `prefers-reduced-motion: reduce` (an accessibility setting of the system or
+// browser; the end-to-end tests ask for it too, so the software renderer does not draw a
+// playing view while a test reads something else).
+function prefersReducedMotion() {
+  return window.matchMedia?.('(prefers-reduced-motion: reduce)').matches ?? false;
+}
+
 function facts(dl, rows) {
   dl.replaceChildren(...rows.flatMap(([k, v]) => {
     const dt = document.createElement('dt');
@@ -157,7 +164,10 @@ export function showScene(scene, summary, how, keepMoment = null) {
     }
   } else {
     viewer.seek(0);
-    viewer.play();
+    // Plays at once, unless the user asked their system for less motion: then the first
+    // frame waits for Play. (A link's range above still loops: the link asked for it.)
+    if (prefersReducedMotion()) viewer.pause();
+    else viewer.play();
   }
   setBusy(false);
   setState('ready');

@@ -62,14 +62,19 @@ describe('the sample, WebGL2 canvas', () => {
     assert.deepEqual(summary.network_runs, { egonet: w, gate: w, fusion: w, fusion_ego_only: w });
   });
 
-  test('plays: the frame advances, and the timeline steps and scrubs', async () => {
+  test('opens paused (reduced motion asked for), plays on Play: the frame advances, and the timeline steps and scrubs', async () => {
     const { page } = app;
     const frame = () => page.evaluate(() => window.egoexo.viewer.frame());
-    const first = await frame();
-    await page.waitForTimeout(600);
-    assert.notEqual(await frame(), first, 'the skeleton moves');
+    const playing = () => page.evaluate(() => window.egoexo.viewer.is_playing());
+    assert.equal(await playing(), false, 'the page asked for reduced motion: the first frame waits for Play');
+    assert.equal(await frame(), 0);
+    assert.equal(await app.text('#play-button'), 'Play');
     await page.click('#play-button');
-    assert.equal(await page.evaluate(() => window.egoexo.viewer.is_playing()), false);
+    assert.equal(await playing(), true);
+    await page.waitForFunction(() => window.egoexo.viewer.frame() > 0, null, { timeout: 10_000 });
+    assert.equal(await app.text('#play-button'), 'Pause');
+    await page.click('#play-button');
+    assert.equal(await playing(), false);
     await page.evaluate(() => {
       const scrubber = document.getElementById('scrubber');
       scrubber.value = '300';

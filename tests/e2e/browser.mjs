@@ -53,8 +53,13 @@ export function chromiumForFile(extraArgs = []) {
 // Opens the app in a fresh context (its own Cache API storage) and records every console
 // error, uncaught exception and failed worker of the page.
 // `setup(context)` runs before the page loads (e.g. to install request routes).
-export async function openApp(browser, query = '', { path = '', setup } = {}) {
-  const context = await browser.newContext({ viewport: { width: 1280, height: 800 }, acceptDownloads: true });
+// The page asks for reduced motion (`prefers-reduced-motion: reduce`), as a user can: a
+// reconstruction then opens paused, so SwiftShader does not draw a playing view while a test
+// reads something else — that kept Chromium's GPU process busy on 1.7 cores
+// (docs/performance.md). Tests of playback press Play; `reducedMotion: 'no-preference'`
+// opens the page as most users see it.
+export async function openApp(browser, query = '', { path = '', setup, reducedMotion = 'reduce' } = {}) {
+  const context = await browser.newContext({ viewport: { width: 1280, height: 800 }, acceptDownloads: true, reducedMotion });
   await setup?.(context);
   const page = await context.newPage();
   const errors = [];

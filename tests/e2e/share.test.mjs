@@ -55,7 +55,8 @@ describe('a capture of several participants', () => {
       console.log(`GROUP ${JSON.stringify({ participants: 2, frames: first.frames, drop_to_ready_ms: reconstructMs })}`);
 
       // The other one: their facts, plots and exports, at the same moment, nothing recomputed.
-      await page.click('#play-button'); // pause
+      // Paused (the tests ask for reduced motion): the moment stays put.
+      assert.equal(await page.evaluate(() => window.egoexo.viewer.is_playing()), false);
       await page.evaluate(() => window.egoexo.viewer.seek(40));
       await page.click('[data-participant=participant-2]');
       assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
@@ -119,7 +120,7 @@ describe('a shared reconstruction', () => {
 
   test('the address follows the scrubber, so copying it shares the moment', async () => {
     const { page } = app;
-    await page.click('#play-button'); // pause
+    assert.equal(await page.evaluate(() => window.egoexo.viewer.is_playing()), false, 'opened paused (reduced motion)');
     await page.evaluate((f) => {
       const scrubber = document.getElementById('scrubber');
       scrubber.value = String(f);
@@ -196,6 +197,19 @@ describe('a shared reconstruction', () => {
         assert.ok(frame >= 150 && frame <= 180, `frame ${frame} outside 5–6 s`);
         await other.page.waitForTimeout(150);
       }
+    } finally {
+      await other.close();
+    }
+  });
+
+  test('a link without a moment plays from the start, as the sample does, unless less motion is asked for', async () => {
+    const other = await openApp(browser(), `?backend=webgl2${link.slice(link.indexOf('#'))}`, { reducedMotion: 'no-preference' });
+    try {
+      assert.equal(await other.waitState(['ready', 'error']), 'ready', await other.text('#error-message'));
+      assert.equal(await other.page.evaluate(() => window.egoexo.viewer.is_playing()), true);
+      await other.page.waitForFunction(() => window.egoexo.viewer.frame() > 0, null, { timeout: 10_000 });
+      assert.equal(await other.text('#play-button'), 'Pause');
+      assert.deepEqual(other.errors, []);
     } finally {
       await other.close();
     }

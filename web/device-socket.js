@@ -70,6 +70,9 @@ export class DeviceSocket {
     } else if (parsed.type === 'observer-world') {
       // A watching page's word on this observer's registration (docs/live-protocol.md).
       this.hooks.onObserverWorld?.(parsed);
+    } else if (parsed.type === 'wearer-region') {
+      // Where a watching page sees the wearer in this camera's image (docs/live-protocol.md).
+      this.hooks.onWearerRegion?.(parsed);
     }
   }
 

@@ -4,9 +4,11 @@
 // this file fetches the model, draws the crop on an OffscreenCanvas and passes bytes along.
 //
 // page → worker: {type: 'frame', bitmap, stampNs}  (the bitmap is transferred and closed here)
+//                {type: 'region', min: [x, y], max: [x, y], atNs}  (a watching page's wearer
+//                 region, the relay's `wearer-region` with its time on this page's clock)
 // worker → page: {type: 'ready', inputSize, bones}
 //                {type: 'keypoints', frame (ArrayBuffer, the data frame to send), keypoints,
-//                 window, cropSource, detectMs, frames, found, width, height}
+//                 window, region, cropSource, detectMs, frames, found, width, height}
 //                {type: 'error', message}
 
 import init, { LiveDetector } from './pkg/egoexo_web_worker.js';
@@ -41,7 +43,7 @@ async function load() {
 function detect({ bitmap, stampNs }) {
   const { width, height } = bitmap;
   const side = detector.inputSize;
-  const draw = detector.crop(width, height);
+  const draw = detector.crop(width, height, stampNs);
   context.fillStyle = '#000';
   context.fillRect(0, 0, side, side);
   if (draw.length === 8) context.drawImage(bitmap, ...draw);
@@ -56,6 +58,7 @@ function detect({ bitmap, stampNs }) {
     frame: frame.buffer,
     keypoints: detector.keypoints(),
     window: detector.window(),
+    region: detector.region(),
     cropSource,
     detectMs,
     frames: detector.frames,
@@ -72,6 +75,16 @@ const ready = load().catch((error) => {
 
 onmessage = async (event) => {
   const message = event.data;
+  if (message?.type === 'region') {
+    await ready.catch(() => {});
+    try {
+      detector?.propose(message.min[0], message.min[1], message.max[0], message.max[1], message.atNs);
+    } catch (error) {
+      // A region this page cannot use: the crop carries on without it.
+      console.warn('egoexo observe: a wearer region was ignored:', error instanceof Error ? error.message : error);
+    }
+    return;
+  }
   if (message?.type !== 'frame') return;
   try {
     await ready;

@@ -130,6 +130,12 @@ class Observation {
         this.world = world;
         this.showStats();
       },
+      // Where the watching page sees the wearer in this camera's image: the next frames are
+      // cropped there (the worker checks it).
+      onWearerRegion: (region) => {
+        this.regions += 1;
+        this.worker?.postMessage({ type: 'region', min: region.region.min, max: region.region.max, atNs: region.at_ns });
+      },
     });
     this.worker = null;
     this.workerReady = false;
@@ -140,6 +146,7 @@ class Observation {
     this.detectMs = [];
     this.last = null; // the newest detection, for the overlay
     this.world = null; // the newest word from a watching page on this camera's registration
+    this.regions = 0; // wearer regions heard from watching pages
     this.uiTimer = setInterval(() => this.showStats(), 250);
     this.awake = new ScreenAwake();
   }
@@ -247,7 +254,8 @@ class Observation {
     if (document.body.dataset.state !== 'error') setState('ready');
   }
 
-  // The preview's overlay: the searched region (dashed) and the person found.
+  // The preview's overlay: the searched window (dashed), the wearer region the ego signals
+  // proposed (solid, when the frame was cropped there) and the person found.
   draw() {
     const canvas = ui.overlay;
     const ctx = canvas.getContext('2d');
@@ -262,6 +270,12 @@ class Observation {
       ctx.strokeStyle = '#f2c14e';
       ctx.strokeRect(x, y, side, side);
       ctx.setLineDash([]);
+    }
+    if (last.region.length === 4) {
+      const [x0, y0, x1, y1] = last.region;
+      ctx.lineWidth = 2 * scale;
+      ctx.strokeStyle = '#4ea1f2';
+      ctx.strokeRect(x0, y0, x1 - x0, y1 - y0);
     }
     const k = last.keypoints;
     const at = (i) => (Number.isNaN(k[3 * i]) ? null : [k[3 * i], k[3 * i + 1]]);
@@ -297,6 +311,8 @@ class Observation {
       : `${this.detected.hz} frames/s${median === null ? '' : `, ${median.toFixed(0)} ms each`}` +
         (last ? `; someone found in ${last.found} of ${last.frames} frames` : '');
     ui.cropSource.textContent = ended || !last ? '—' : last.cropSource;
+    document.body.dataset.cropSource = last ? last.cropSource : '';
+    document.body.dataset.regions = String(this.regions);
     const { sent, skipped } = this.relay;
     ui.framesSent.textContent = `${sent}${skipped ? ` (${skipped} skipped on a slow network)` : ''}`;
     // What the page watching the room says: registering (not used yet), then registered (its

@@ -4,7 +4,8 @@
 // from the panel's QR code as a phone would),
 // joins the room as a static camera and streams the keypoints its detector finds, while
 // `egoexo live replay --no-observers` streams the wearer's glasses. The watching page receives
-// the camera's keypoints, lists it, registers it in 6 DoF and fuses its rays.
+// the camera's keypoints, lists it, registers it in 6 DoF and fuses its rays, and tells the
+// camera where it sees the wearer, which the camera then crops.
 
 import assert from 'node:assert/strict';
 import { execFileSync } from 'node:child_process';
@@ -152,6 +153,11 @@ describe('observer page', () => {
       const fused = await waitFor('its rays fused or the replay ended', async () => ({ l: await live(app), ended: replayEnded }),
         ({ l, ended }) => ended || (l.lastFrame?.exo_observers ?? []).includes('tripod'), 60_000);
       assert.ok((fused.l.lastFrame?.exo_observers ?? []).includes('tripod'), `the replay ended before its rays were fused: ${JSON.stringify(fused.l.lastFrame)}`);
+      // Placed, the camera hears where the watching page sees the wearer in its image (the
+      // ego signals' region) and crops there.
+      await camera.page.waitForFunction(() => Number(document.body.dataset.regions) > 0 && document.body.dataset.cropSource === 'ego signals', null, { timeout: 15_000 })
+        .catch(async (e) => assert.fail(`the camera page never cropped in a wearer region (${await camera.page.evaluate(() => JSON.stringify(document.body.dataset))}): ${e.message}`));
+      sub.diagnostic(`camera page: ${await camera.page.evaluate(() => document.body.dataset.regions)} wearer regions heard, region: ${await camera.text('#crop-source')}`);
     });
     await replay;
     // Stop lets the screen sleep again.

@@ -2,10 +2,13 @@
 //! crop each frame, the camera's calibration when all a browser gives is the image size and
 //! maybe a field of view, and when a frame was captured.
 //!
-//! Without the ego signals' region (a recorded session's detector step has EgoNet's coarse
-//! pose; a live camera does not yet), each frame is cropped around the person the previous
-//! frame found — the tracking crop of top-down pose models such as MoveNet — and a frame
-//! after a miss is searched whole ([`LiveCropTracker`]).
+//! Where to crop ([`LiveCropTracker`]): in the region the ego signals propose — a watching
+//! page's newest reconstruction of the wearer projected into this camera once it knows where
+//! the camera stands (`wearer-region` in `docs/live-protocol.md`; the recorded pipeline's
+//! region, paper § Ego-Guided Wearer Localization) — widened to the person the previous frame
+//! found when that is the same person. Without a fresh region (before registration, or no
+//! page watching), around the person the previous frame found — the tracking crop of top-down
+//! pose models such as MoveNet — and a frame after a miss is searched whole.
 //!
 //! Conventions as the detector step's: pixels with the centre of the top-left pixel at
 //! (0, 0); nanoseconds since the Unix epoch on the page's clock (the one its pongs report).
@@ -33,13 +36,22 @@ pub const TRACKING_MARGIN: f32 = 0.3;
 /// laptop webcam or phone's main camera (60–78°). Registration refines the focal length.
 pub const DEFAULT_HORIZONTAL_FOV_DEG: f64 = 65.0;
 
+/// How far from a frame's capture a wearer region may be for the frame, nanoseconds. A region
+/// is for the newest head pose a watching page has, and reaches the camera 0.2–0.4 s later
+/// (the head pose to the relay and the page, a reconstruction, the region back through the
+/// relay); a wearer walking at 1.5 m/s moves a few tenths of a metre meanwhile, which the
+/// region's margin and the tracked person around it cover. Older regions are not used.
+pub const MAX_REGION_AGE_NS: i64 = 600_000_000;
+
 /// Where the next frame's crop comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CropSource {
-    /// No one found yet (or lost): the whole frame.
+    /// No one found yet (or lost), and no region: the whole frame.
     WholeFrame,
     /// Around the person the previous frame found.
     Tracking,
+    /// The region the ego signals propose (with the previous frame's person, when they agree).
+    EgoSignals,
 }
 
 impl CropSource {
@@ -48,23 +60,36 @@ impl CropSource {
         match self {
             CropSource::WholeFrame => "whole frame",
             CropSource::Tracking => "tracking",
+            CropSource::EgoSignals => "ego signals",
         }
     }
 }
 
-/// The crop of each frame of one camera: around the previous frame's person, else the whole
-/// frame (a square around it, black bars on the short sides).
+/// The crop of one frame: its window, where that came from, and the wearer region used.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CropPlan {
+    pub window: CropWindow,
+    pub source: CropSource,
+    /// The wearer region the window holds ([`CropSource::EgoSignals`]).
+    pub region: Option<BoundingBox>,
+}
+
+/// The crop of each frame of one camera: in the wearer region the ego signals propose, else
+/// around the previous frame's person, else the whole frame (a square around it, black bars
+/// on the short sides).
 #[derive(Clone, Debug, PartialEq)]
 pub struct LiveCropTracker {
     width: u32,
     height: u32,
     tracked: Option<BoundingBox>,
+    /// The newest wearer region and the moment it is for (the page's clock, ns).
+    proposed: Option<(BoundingBox, i64)>,
 }
 
 impl LiveCropTracker {
     /// A tracker for frames of `width × height` pixels, searching the whole frame first.
     pub fn new(width: u32, height: u32) -> Self {
-        Self { width, height, tracked: None }
+        Self { width, height, tracked: None, proposed: None }
     }
 
     /// The frames' size.
@@ -72,20 +97,44 @@ impl LiveCropTracker {
         (self.width, self.height)
     }
 
-    /// Where the next frame's window comes from.
-    pub fn source(&self) -> CropSource {
-        if self.tracked.is_some() { CropSource::Tracking } else { CropSource::WholeFrame }
+    /// Takes a wearer region (full-image pixels) for the moment `at_ns` (the page's clock). One
+    /// older than the region held, or missing the image, is ignored.
+    pub fn propose(&mut self, region: BoundingBox, at_ns: i64) {
+        let sane = region.min.is_finite() && region.max.is_finite() && region.min.cmple(region.max).all();
+        if sane && self.overlaps_image(&region) && self.proposed.is_none_or(|(_, held)| at_ns >= held) {
+            self.proposed = Some((region, at_ns));
+        }
     }
 
-    /// The next frame's window.
-    pub fn window(&self) -> CropWindow {
-        let whole = || {
-            let (w, h) = (self.width as f32, self.height as f32);
-            let side = w.max(h).max(1.0);
-            // The image spans [-0.5, size - 0.5]; the square is centred on it.
-            CropWindow { min: Vec2::new(0.5 * (w - side) - 0.5, 0.5 * (h - side) - 0.5), side }
+    /// The crop of a frame captured at `frame_ns` (the page's clock): the wearer region when
+    /// one is within [`MAX_REGION_AGE_NS`] of it — grown to hold the previous frame's person
+    /// where the two overlap (the same person, and the region may lag them) — else around the
+    /// previous frame's person, else the whole frame.
+    pub fn plan(&self, frame_ns: i64) -> CropPlan {
+        let region = self
+            .proposed
+            .filter(|(_, at)| frame_ns.saturating_sub(*at).unsigned_abs() <= MAX_REGION_AGE_NS as u64)
+            .map(|(region, _)| region);
+        let (around, source) = match (region, self.tracked) {
+            (Some(r), Some(t)) if r.intersection(&t).is_some() => {
+                (Some(BoundingBox { min: r.min.min(t.min), max: r.max.max(t.max) }), CropSource::EgoSignals)
+            }
+            (Some(r), _) => (Some(r), CropSource::EgoSignals),
+            (None, Some(t)) => (Some(t), CropSource::Tracking),
+            (None, None) => (None, CropSource::WholeFrame),
         };
-        self.tracked.as_ref().and_then(|b| CropWindow::around(b, MIN_CROP_SIDE_PX)).unwrap_or_else(whole)
+        match around.and_then(|b| CropWindow::around(&b, MIN_CROP_SIDE_PX)) {
+            Some(window) => CropPlan { window, source, region },
+            None => CropPlan { window: self.whole_frame(), source: CropSource::WholeFrame, region: None },
+        }
+    }
+
+    /// The square around the whole frame.
+    fn whole_frame(&self) -> CropWindow {
+        let (w, h) = (self.width as f32, self.height as f32);
+        let side = w.max(h).max(1.0);
+        // The image spans [-0.5, size - 0.5]; the square is centred on it.
+        CropWindow { min: Vec2::new(0.5 * (w - side) - 0.5, 0.5 * (h - side) - 0.5), side }
     }
 
     /// Takes the detector's output for a frame cropped to `window`: its keypoints in
@@ -187,8 +236,8 @@ mod tests {
     #[test]
     fn the_whole_frame_first_then_around_the_person_found_then_whole_again_after_a_miss() {
         let mut tracker = LiveCropTracker::new(640, 480);
-        assert_eq!(tracker.source(), CropSource::WholeFrame);
-        let whole = tracker.window();
+        assert_eq!(tracker.plan(0).source, CropSource::WholeFrame);
+        let whole = tracker.plan(0).window;
         assert_eq!(whole.side, 640.0);
         // The square is centred on the image: 80 px of black above and below.
         assert_eq!(whole.min, Vec2::new(-0.5, -80.5));
@@ -198,8 +247,8 @@ mod tests {
         let keypoints = tracker.record(&whole, &detection(&person, 0.8));
         assert_eq!(keypoints.iter().flatten().count(), 6);
         assert_eq!(keypoints[0].unwrap().pixel, whole.full_from_normalized(Vec2::new(0.45, 0.45)));
-        assert_eq!(tracker.source(), CropSource::Tracking);
-        let next = tracker.window();
+        assert_eq!(tracker.plan(0).source, CropSource::Tracking);
+        let next = tracker.plan(0).window;
         // Around the person: their box is 64 × 96 px (0.1 × 0.15 of 640), 30 % of its longer side
         // added each side → 153.6 px, centred on it.
         assert!((next.side - 153.6).abs() < 1e-3, "{next:?}");
@@ -207,11 +256,55 @@ mod tests {
         // Keypoints below the score floor are dropped; too few kept is a miss.
         let keypoints = tracker.record(&next, &detection(&person, 0.2));
         assert!(keypoints.iter().all(Option::is_none));
-        assert_eq!((tracker.source(), tracker.window()), (CropSource::WholeFrame, whole));
+        assert_eq!(tracker.plan(0), CropPlan { window: whole, source: CropSource::WholeFrame, region: None });
         // A tiny person still gets a crop of at least MIN_CROP_SIDE_PX.
         let tiny = [(0.5, 0.5), (0.501, 0.5), (0.5, 0.501), (0.501, 0.501), (0.5005, 0.5005)];
         tracker.record(&whole, &detection(&tiny, 0.9));
-        assert_eq!(tracker.window().side, MIN_CROP_SIDE_PX);
+        assert_eq!(tracker.plan(0).window.side, MIN_CROP_SIDE_PX);
+    }
+
+    #[test]
+    fn the_ego_signals_region_is_cropped_while_fresh_and_widened_to_the_same_person_found() {
+        const MS: i64 = 1_000_000;
+        let mut tracker = LiveCropTracker::new(640, 480);
+        let region = BoundingBox { min: Vec2::new(200.0, 100.0), max: Vec2::new(300.0, 400.0) };
+        tracker.propose(region, 1_000 * MS);
+        // A frame within MAX_REGION_AGE_NS of the region's moment, either side, is cropped there.
+        for frame_ms in [1_000, 1_000 + 600, 1_000 - 600] {
+            let plan = tracker.plan(frame_ms * MS);
+            assert_eq!((plan.source, plan.region), (CropSource::EgoSignals, Some(region)), "{frame_ms} ms");
+            assert_eq!(plan.window, CropWindow::around(&region, MIN_CROP_SIDE_PX).unwrap());
+        }
+        // Later than that: the whole frame again (nobody tracked), and `ego signals` is named.
+        assert_eq!(tracker.plan(1_601 * MS).source, CropSource::WholeFrame);
+        assert_eq!(CropSource::EgoSignals.name(), "ego signals");
+        // The person found overlaps the region (the same person, a step ahead of it): the crop
+        // holds both.
+        let whole = tracker.plan(1_601 * MS).window;
+        let person = [(0.45, 0.3), (0.55, 0.3), (0.45, 0.5), (0.55, 0.5), (0.5, 0.4)];
+        tracker.record(&whole, &detection(&person, 0.8));
+        let found = tracker.plan(1_601 * MS).window;
+        let plan = tracker.plan(1_000 * MS);
+        assert_eq!(plan.source, CropSource::EgoSignals);
+        for corner in [region.min, region.max] {
+            let u = plan.window.normalized_from_full(corner);
+            assert!(u.cmpge(Vec2::ZERO).all() && u.cmple(Vec2::ONE).all(), "{corner} outside {plan:?}");
+        }
+        assert!(plan.window.side > CropWindow::around(&region, MIN_CROP_SIDE_PX).unwrap().side);
+        assert!(found.full_from_normalized(Vec2::splat(0.5)).x > 300.0, "{found:?}");
+        // A person elsewhere (a bystander): the region alone.
+        let bystander = [(0.9, 0.3), (0.95, 0.3), (0.9, 0.5), (0.95, 0.5), (0.92, 0.4)];
+        tracker.record(&whole, &detection(&bystander, 0.8));
+        assert_eq!(tracker.plan(1_000 * MS).window, CropWindow::around(&region, MIN_CROP_SIDE_PX).unwrap());
+        // An older region, one missing the image and one that is no box are ignored.
+        let elsewhere = BoundingBox { min: Vec2::new(10.0, 10.0), max: Vec2::new(60.0, 200.0) };
+        tracker.propose(elsewhere, 900 * MS);
+        tracker.propose(BoundingBox { min: Vec2::new(700.0, 10.0), max: Vec2::new(800.0, 200.0) }, 1_100 * MS);
+        tracker.propose(BoundingBox { min: region.max, max: region.min }, 1_100 * MS);
+        tracker.propose(BoundingBox { min: Vec2::NAN, max: region.max }, 1_100 * MS);
+        assert_eq!(tracker.plan(1_000 * MS).region, Some(region));
+        tracker.propose(elsewhere, 1_100 * MS);
+        assert_eq!(tracker.plan(1_000 * MS).region, Some(elsewhere));
     }
 
     #[test]

@@ -18,6 +18,7 @@
 use egoexo_core::camera::CameraCalibration;
 use egoexo_core::exo_keypoints::{COCO17_COUNT, Keypoint2d};
 use egoexo_core::glam::{Quat, Vec2, Vec3};
+use egoexo_core::region::BoundingBox;
 use egoexo_core::rigid::RigidTransform;
 use serde::{Deserialize, Serialize};
 
@@ -32,6 +33,8 @@ pub const HISTORY_S: f64 = 3.2;
 pub const MAX_MESSAGE_BYTES: usize = 64 << 10;
 /// Longest `message` of an [`ClientMessage::ObserverWorld`], characters.
 pub const MAX_WORLD_MESSAGE_CHARS: usize = 400;
+/// Largest pixel coordinate, either sign, of a [`ClientMessage::WearerRegion`].
+pub const MAX_REGION_COORD_PX: f32 = 65_536.0;
 
 /// A room's id: 22 characters of base64url (128 random bits).
 pub type RoomId = String;
@@ -303,6 +306,23 @@ pub enum ClientMessage {
     /// Viewers only; `message` at most [`MAX_WORLD_MESSAGE_CHARS`] characters. (Added within
     /// version 1: devices ignore relay messages they do not know.)
     ObserverWorld { device: String, state: WorldState, message: String },
+    /// A viewer's proposal of where observer `device`'s wearer is in its image at `at_ns` (relay
+    /// clock): the viewer's newest reconstruction of the wearer projected with the observer's
+    /// camera at its pose in the wearer's world, registered or shared (paper § Ego-Guided
+    /// Wearer Localization). The relay passes it to that device as a
+    /// [`RelayMessage::WearerRegion`], so a camera page crops there. Viewers only; `region` in
+    /// full-image pixels ([`region_problem`] says what is refused). (Added within version 1.)
+    WearerRegion { device: String, region: BoundingBox, at_ns: i64 },
+}
+
+/// Why `region` cannot be a [`ClientMessage::WearerRegion`]'s: a coordinate not finite or
+/// beyond ±[`MAX_REGION_COORD_PX`], or `min` past `max`.
+pub fn region_problem(region: &BoundingBox) -> Option<&'static str> {
+    let corners = [region.min, region.max];
+    if !corners.iter().all(|c| c.is_finite() && c.abs().max_element() <= MAX_REGION_COORD_PX) {
+        return Some("a wearer region's corners must be finite pixels within ±65536");
+    }
+    (region.min.x > region.max.x || region.min.y > region.max.y).then_some("a wearer region's min is past its max")
 }
 
 /// Where a viewer's registration of an observer's world stands.
@@ -402,6 +422,11 @@ pub enum RelayMessage {
     /// ([`ClientMessage::ObserverWorld`]), from viewer `viewer` (a room's viewers each register
     /// on their own; the newest word is the one to show).
     ObserverWorld { viewer: u32, state: WorldState, message: String },
+    /// To an observer: viewer `viewer`'s proposal of where its wearer is in its image
+    /// ([`ClientMessage::WearerRegion`]), for the moment `at_ns` on **the device's** clock (the
+    /// relay maps it with the device's clock offset; a proposal before the device's first pong
+    /// is dropped).
+    WearerRegion { viewer: u32, region: BoundingBox, at_ns: i64 },
 }
 
 /// Why the relay closed a connection: the WebSocket close code, with a sentence as the reason.
@@ -878,6 +903,24 @@ mod tests {
             examples += 1;
         }
         assert!(examples >= 6, "{examples} examples");
+    }
+
+    #[test]
+    fn a_wearer_region_is_a_pixel_box_at_a_time_and_nonsense_boxes_are_named() {
+        let region = BoundingBox { min: Vec2::new(100.0, 40.5), max: Vec2::new(260.0, 470.0) };
+        let message = ClientMessage::WearerRegion { device: "phone".into(), region, at_ns: 1_764_600_000_000_000_000 };
+        assert_eq!(
+            serde_json::to_value(&message).unwrap(),
+            serde_json::json!({"type": "wearer-region", "device": "phone",
+                "region": {"min": [100.0, 40.5], "max": [260.0, 470.0]}, "at_ns": 1_764_600_000_000_000_000i64})
+        );
+        assert_eq!(region_problem(&region), None);
+        let flipped = BoundingBox { min: region.max, max: region.min };
+        assert_eq!(region_problem(&flipped), Some("a wearer region's min is past its max"));
+        for bad in [f32::NAN, f32::INFINITY, 1e6] {
+            let b = BoundingBox { max: Vec2::new(bad, 470.0), ..region };
+            assert!(region_problem(&b).unwrap().contains("finite"), "{bad}");
+        }
     }
 
     #[test]

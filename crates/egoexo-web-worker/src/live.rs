@@ -23,13 +23,20 @@
 //! reconstructed without them (ego-only when nobody else sees the wearer); once it holds,
 //! their poses are mapped into the wearer's world and fused; a world that jumps is
 //! registered again. Every frame says where each stands ([`LiveFrame::observer_worlds`]).
+//!
+//! Every observer whose pose in a wearer's world is known (registered, or shared) is told
+//! where this viewer sees the wearer in its image ([`LiveFrame::wearer_regions`], sent by
+//! [`RegionReports`]): the window's newest frame of the reconstruction projected with its
+//! camera — the region a recorded session's detector step crops (paper § Ego-Guided Wearer
+//! Localization), so a camera page crops there too.
 
 use std::collections::BTreeMap;
 use std::ops::Range;
 
-use egoexo_core::aligned::Timeline;
+use egoexo_core::aligned::{AlignedSession, Timeline};
+use egoexo_core::region::{BoundingBox, DEFAULT_REGION_MARGIN, RegionProposal, propose_region};
 use egoexo_infer::windows::WINDOW;
-use egoexo_infer::{Engine, InferError, Method, ReconstructOptions};
+use egoexo_infer::{Engine, InferError, Method, ReconstructOptions, Reconstruction};
 use egoexo_protocol::live::{ClientMessage, DataFrame, MAX_WORLD_MESSAGE_CHARS, RelayMessage, WorldState};
 use egoexo_protocol::worker::{LiveFrameInfo, LiveObserverWorld, LiveTakeSummary};
 use egoexo_register::RegisterError;
@@ -74,6 +81,23 @@ const MARGIN_NS: i64 = 200_000_000;
 /// ~120 ms past lookahead 4.
 pub const RECENT_EXO_FRAMES: usize = 4;
 
+/// How far back from a window's newest frame an observer's pose may be for its wearer region
+/// (grid frames: 333 ms at 30 Hz): a worn camera turns, and an older pose would place the
+/// region wrong. A fixed camera's one pose holds at every frame.
+const REGION_POSE_FRAMES: usize = 10;
+
+/// Where this viewer sees a wearer in an observer's image: the region it proposes to that
+/// observer ([`ClientMessage::WearerRegion`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ObserverRegion {
+    pub observer: String,
+    /// The box around the wearer's projected joints with [`DEFAULT_REGION_MARGIN`], clipped
+    /// to the image: full-image pixels of the observer's camera.
+    pub region: BoundingBox,
+    /// The moment it is for: the window's newest frame (relay clock, ns).
+    pub at_ns: i64,
+}
+
 /// One frame to draw.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LiveFrame {
@@ -103,6 +127,9 @@ pub struct LiveFrame {
     pub wearers: Vec<String>,
     /// Observers in worlds of their own and where their registration stands.
     pub observer_worlds: Vec<LiveObserverWorld>,
+    /// Where each observer placed in a wearer's world sees that wearer, at the window's newest
+    /// frame (every wearer's, one region per observer).
+    pub wearer_regions: Vec<ObserverRegion>,
 }
 
 /// A take and the state of its live reconstruction.
@@ -264,12 +291,19 @@ impl LiveReconstructor {
         let wearers = self.take.wearers();
         self.update_registration(engine, newest_ns, &wearers);
         let index = frame - start;
-        let reconstruct_wearer = |wearer: &str| -> Result<_, LiveError> {
+        let mut wearer_regions: Vec<ObserverRegion> = Vec::new();
+        let mut reconstruct_wearer = |wearer: &str| -> Result<_, LiveError> {
             let (mut session, _) = self.take.to_session_of(wearer, "live", Some(range.clone()))?;
             self.registration.apply(&mut session)?;
             let aligned =
                 align_on_timeline(&session, timeline, &AlignOptions { fps: self.fps, ..AlignOptions::default() })?;
-            reconstruct_frame(engine, &aligned, index)
+            let (recon, scene) = reconstruct_frame(engine, &aligned, index)?;
+            for region in wearer_regions_of(&aligned, &recon, last_ns) {
+                if !wearer_regions.iter().any(|r| r.observer == region.observer) {
+                    wearer_regions.push(region);
+                }
+            }
+            Ok((recon, scene))
         };
         // `newest` found a head pose, so there is a first wearer.
         let Some(first) = wearers.first() else { return Ok(None) };
@@ -314,8 +348,38 @@ impl LiveReconstructor {
             skipped,
             wearers: if wearers.len() > 1 { wearers } else { Vec::new() },
             observer_worlds: self.observer_worlds(),
+            wearer_regions,
         }))
     }
+}
+
+/// Where each observer of `aligned` whose pose in the wearer's world is known (not masked by
+/// alignment: shared, or registered) sees the wearer at the window's newest frame (`at_ns`):
+/// the reconstruction's joints there projected with the observer's camera at its newest pose
+/// within [`REGION_POSE_FRAMES`]. Observers the wearer is not in front of get none.
+fn wearer_regions_of(aligned: &AlignedSession, recon: &Reconstruction, at_ns: i64) -> Vec<ObserverRegion> {
+    let Some(newest) = aligned.timeline.frames.checked_sub(1) else { return Vec::new() };
+    if !recon.valid.get(newest).copied().unwrap_or(false) {
+        return Vec::new();
+    }
+    let Some(joints) = recon.joints.get(newest) else { return Vec::new() };
+    aligned
+        .observers
+        .iter()
+        .filter_map(|observer| {
+            let head = &observer.head;
+            let pose = (newest.saturating_sub(REGION_POSE_FRAMES)..=newest)
+                .rev()
+                .find(|&f| head.valid.get(f).copied().unwrap_or(false))
+                .and_then(|f| head.poses.get(f))?;
+            match propose_region(joints, &observer.camera, pose, DEFAULT_REGION_MARGIN) {
+                RegionProposal::Visible { bbox, .. } => {
+                    Some(ObserverRegion { observer: observer.id.clone(), region: bbox, at_ns })
+                }
+                RegionProposal::NotVisible(_) => None,
+            }
+        })
+        .collect()
 }
 
 /// Reconstructs the window `aligned` and returns it with the scene of frame `index` (its rays
@@ -418,12 +482,65 @@ impl WorldReports {
     }
 }
 
+/// When this viewer tells an observer where it sees the wearer ([`ClientMessage::WearerRegion`]):
+/// at most every [`RegionReports::EVERY_MS`] per observer — a camera page detects 7–15 frames
+/// a second, and a region a frame older than the last one sent tells it little more.
+#[derive(Debug, Default)]
+pub struct RegionReports {
+    /// Per observer: when its region was last sent (viewer clock, ms).
+    sent: BTreeMap<String, f64>,
+}
+
+impl RegionReports {
+    pub const EVERY_MS: f64 = 100.0;
+
+    /// The proposals due at `now_ms` (the viewer's clock, ms) for a frame's `regions`.
+    pub fn due(&mut self, regions: &[ObserverRegion], now_ms: f64) -> Vec<ClientMessage> {
+        let mut due = Vec::new();
+        for r in regions {
+            if self.sent.get(&r.observer).is_none_or(|at| now_ms - at >= Self::EVERY_MS) {
+                self.sent.insert(r.observer.clone(), now_ms);
+                due.push(ClientMessage::WearerRegion { device: r.observer.clone(), region: r.region, at_ns: r.at_ns });
+            }
+        }
+        due
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    use egoexo_core::glam::Vec2;
+    use egoexo_core::region::BoundingBox;
     use egoexo_protocol::live::{ClientMessage, WorldState};
     use egoexo_protocol::worker::LiveObserverWorld;
 
-    use super::WorldReports;
+    use super::{ObserverRegion, RegionReports, WorldReports};
+
+    #[test]
+    fn each_observer_hears_where_the_wearer_is_at_most_ten_times_a_second() {
+        let mut reports = RegionReports::default();
+        let region = |observer: &str, x: f32, at_ns: i64| ObserverRegion {
+            observer: observer.into(),
+            region: BoundingBox { min: Vec2::new(x, 10.0), max: Vec2::new(x + 50.0, 200.0) },
+            at_ns,
+        };
+        let sent = |due: Vec<ClientMessage>| -> Vec<(String, f32, i64)> {
+            due.into_iter()
+                .map(|m| match m {
+                    ClientMessage::WearerRegion { device, region, at_ns } => (device, region.min.x, at_ns),
+                    other => panic!("{other:?}"),
+                })
+                .collect()
+        };
+        assert_eq!(sent(reports.due(&[region("tripod", 1.0, 10)], 0.0)), [("tripod".into(), 1.0, 10)]);
+        assert!(reports.due(&[region("tripod", 2.0, 20)], 99.0).is_empty());
+        // Each observer on its own clock of reports; the newest region goes.
+        assert_eq!(
+            sent(reports.due(&[region("tripod", 3.0, 30), region("phone", 4.0, 30)], 100.0)),
+            [("tripod".into(), 3.0, 30), ("phone".into(), 4.0, 30)]
+        );
+        assert_eq!(sent(reports.due(&[region("phone", 5.0, 40)], 150.0)), []);
+    }
 
     fn world(observer: &str, state: WorldState, message: &str) -> LiveObserverWorld {
         LiveObserverWorld {

@@ -9,20 +9,23 @@
 //! - [`observer_hello`] — a static camera (`"mount": "fixed"`, keypoints only) watching a
 //!   target wearer; [`calibration_message`] — its camera from the image size and the field of
 //!   view the browser reports, or a default it says is a guess;
-//! - [`LiveDetector`] — where to crop the next frame ([`egoexo_detect::live::LiveCropTracker`]),
-//!   the detector on that crop, and the keypoints as a binary data frame (op 2) stamped with
-//!   the frame's capture time ([`egoexo_detect::live::frame_time_ns`]).
+//! - [`LiveDetector`] — where to crop the next frame ([`egoexo_detect::live::LiveCropTracker`]:
+//!   the wearer region a watching page proposes, the person tracked, or the whole frame), the
+//!   detector on that crop, and the keypoints as a binary data frame (op 2) stamped with the
+//!   frame's capture time ([`egoexo_detect::live::frame_time_ns`]).
 //!
 //! Nothing here reads a clock: the page passes every time in.
 
-use egoexo_core::crop::{CanvasDraw, CropWindow};
+use egoexo_core::crop::CanvasDraw;
 use egoexo_core::exo_keypoints::{COCO17_COUNT, Keypoint2d};
-use egoexo_detect::live::{CropSource, LiveCropTracker, browser_camera};
+use egoexo_core::glam::Vec2;
+use egoexo_core::region::BoundingBox;
+use egoexo_detect::live::{CropPlan, CropSource, LiveCropTracker, browser_camera};
 use egoexo_infer::manifest::Manifest;
 use egoexo_infer::{InferError, KeypointDetector};
 use egoexo_protocol::live::{
     ClientMessage, DataFrame, DeviceHello, DeviceMount, DeviceRole, DeviceWorld, FramePayload, Join,
-    LIVE_PROTOCOL_VERSION, Stream, valid_device_id,
+    LIVE_PROTOCOL_VERSION, Stream, region_problem, valid_device_id,
 };
 
 /// What went wrong on the observer page, in words for the person holding the camera.
@@ -44,6 +47,8 @@ pub enum ObserveError {
     Timestamp(f64),
     #[error("no frame was cropped before this detection")]
     NoCrop,
+    #[error("a wearer region from the relay: {0}")]
+    Region(&'static str),
     #[error("could not write a protocol message: {0}")]
     Json(String),
 }
@@ -96,16 +101,24 @@ pub fn calibration_message(
     Ok((json, known))
 }
 
+/// A page time in nanoseconds since the epoch (an f64 from JS) as an integer.
+fn nanoseconds(ns: f64) -> Result<i64, ObserveError> {
+    if !ns.is_finite() || ns.abs() >= 9.0e18 {
+        return Err(ObserveError::Timestamp(ns));
+    }
+    Ok(ns.round() as i64)
+}
+
 /// The detector of one camera's frames, and the crop that follows the person it finds.
 #[derive(Debug)]
 pub struct LiveDetector {
     detector: KeypointDetector,
     tracker: LiveCropTracker,
-    /// The window of the frame being detected (set by [`LiveDetector::crop`]).
-    cropped: Option<CropWindow>,
-    /// The last frame's keypoints (full-image pixels) and the window they came from.
+    /// The crop of the frame being detected (set by [`LiveDetector::crop`]).
+    cropped: Option<CropPlan>,
+    /// The last frame's keypoints (full-image pixels) and the crop they came from.
     last: [Option<Keypoint2d>; COCO17_COUNT],
-    last_window: Option<CropWindow>,
+    last_crop: Option<CropPlan>,
     frames: u64,
     found: u64,
 }
@@ -124,7 +137,7 @@ impl LiveDetector {
             tracker: LiveCropTracker::new(1, 1),
             cropped: None,
             last: [None; COCO17_COUNT],
-            last_window: None,
+            last_crop: None,
             frames: 0,
             found: 0,
         })
@@ -135,48 +148,58 @@ impl LiveDetector {
         self.detector.input_size()
     }
 
-    /// The next frame (`width × height`)'s crop as one `drawImage` onto a black
-    /// `input_size²` canvas. A frame of another size than the last restarts the search from
-    /// the whole frame.
-    pub fn crop(&mut self, width: u32, height: u32) -> Option<CanvasDraw> {
+    /// The crop of the next frame (`width × height`, captured at `timestamp_ns` on the page's
+    /// clock) as one `drawImage` onto a black `input_size²` canvas. A frame of another size
+    /// than the last restarts the search from the whole frame.
+    pub fn crop(&mut self, width: u32, height: u32, timestamp_ns: f64) -> Result<Option<CanvasDraw>, ObserveError> {
+        let frame_ns = nanoseconds(timestamp_ns)?;
         if self.tracker.size() != (width, height) {
             self.tracker = LiveCropTracker::new(width, height);
         }
-        let window = self.tracker.window();
-        self.cropped = Some(window);
-        window.canvas_draw(width, height, self.input_size())
+        let plan = self.tracker.plan(frame_ns);
+        self.cropped = Some(plan);
+        Ok(plan.window.canvas_draw(width, height, self.input_size()))
     }
 
-    /// Where the crop of the frame being detected comes from.
+    /// Where the crop of the frame being detected (or else the last) comes from.
     pub fn crop_source(&self) -> CropSource {
-        self.tracker.source()
+        self.cropped.or(self.last_crop).map_or(CropSource::WholeFrame, |c| c.source)
+    }
+
+    /// A watching page's wearer region ([`egoexo_protocol::live::RelayMessage::WearerRegion`]):
+    /// its corners in full-image pixels, for the moment `at_ns` on the page's clock.
+    pub fn propose(&mut self, min: [f32; 2], max: [f32; 2], at_ns: f64) -> Result<(), ObserveError> {
+        let region = BoundingBox { min: Vec2::from(min), max: Vec2::from(max) };
+        if let Some(problem) = region_problem(&region) {
+            return Err(ObserveError::Region(problem));
+        }
+        self.tracker.propose(region, nanoseconds(at_ns)?);
+        Ok(())
     }
 
     /// Detects on the crop of the frame [`LiveDetector::crop`] planned (`input_size²` pixels,
     /// RGBA as a canvas gives them) and returns the keypoints data frame (op 2, the device's
     /// keypoints channel) stamped `timestamp_ns` (the frame's time on the page's clock).
     pub fn detect(&mut self, crop_rgba: &[u8], timestamp_ns: f64) -> Result<Vec<u8>, ObserveError> {
-        if !timestamp_ns.is_finite() || timestamp_ns.abs() >= 9.0e18 {
-            return Err(ObserveError::Timestamp(timestamp_ns));
-        }
+        let timestamp_ns = nanoseconds(timestamp_ns)?;
         let side = self.input_size();
         let pixels = side as usize * side as usize;
         if crop_rgba.len() != pixels * 4 {
             return Err(ObserveError::CropSize { got: crop_rgba.len(), expected: pixels * 4, side });
         }
-        let window = self.cropped.take().ok_or(ObserveError::NoCrop)?;
+        let crop = self.cropped.take().ok_or(ObserveError::NoCrop)?;
         let rgb: Vec<u8> = crop_rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
         let found = self.detector.detect(&rgb)?;
-        let keypoints = self.tracker.record(&window, &found);
+        let keypoints = self.tracker.record(&crop.window, &found);
         self.frames += 1;
         if keypoints.iter().any(Option::is_some) {
             self.found += 1;
         }
         self.last = keypoints;
-        self.last_window = Some(window);
+        self.last_crop = Some(crop);
         let frame = DataFrame {
             channel: Stream::Keypoints.channel(),
-            timestamp_ns: timestamp_ns.round() as i64,
+            timestamp_ns,
             payload: FramePayload::Keypoints(keypoints),
         };
         Ok(frame.encode())
@@ -197,7 +220,16 @@ impl LiveDetector {
     /// The last frame's crop window for the overlay: [x, y, side] of its top-left edge,
     /// full-image pixels (empty before the first detection).
     pub fn window(&self) -> Vec<f32> {
-        self.last_window.map(|w| vec![w.min.x + 0.5, w.min.y + 0.5, w.side]).unwrap_or_default()
+        self.last_crop.map(|c| vec![c.window.min.x + 0.5, c.window.min.y + 0.5, c.window.side]).unwrap_or_default()
+    }
+
+    /// The wearer region the last frame was cropped in, for the overlay: [x0, y0, x1, y1] of its
+    /// edges, full-image pixels (empty when the frame had none).
+    pub fn region(&self) -> Vec<f32> {
+        self.last_crop
+            .and_then(|c| c.region)
+            .map(|r| vec![r.min.x + 0.5, r.min.y + 0.5, r.max.x + 0.5, r.max.y + 0.5])
+            .unwrap_or_default()
     }
 
     /// Frames detected on, and of those, frames with a person found.
@@ -284,13 +316,25 @@ mod bindings {
             self.inner.input_size()
         }
 
-        /// The next frame's crop: `Float32Array` [sx, sy, sw, sh, dx, dy, dw, dh] for
-        /// `drawImage`, empty when the window misses the frame.
-        pub fn crop(&mut self, width: u32, height: u32) -> Vec<f32> {
-            self.inner.crop(width, height).map(|d| [d.source, d.dest].concat()).unwrap_or_default()
+        /// The crop of the next frame (captured at `timestamp_ns`, the page's clock):
+        /// `Float32Array` [sx, sy, sw, sh, dx, dy, dw, dh] for `drawImage`, empty when the
+        /// window misses the frame.
+        pub fn crop(&mut self, width: u32, height: u32, timestamp_ns: f64) -> Result<Vec<f32>, JsError> {
+            Ok(self.inner.crop(width, height, timestamp_ns).map_err(js)?.map(|d| [d.source, d.dest].concat()).unwrap_or_default())
         }
 
-        /// `whole frame` or `tracking`.
+        /// A watching page's wearer region (the relay's `wearer-region`): corners in
+        /// full-image pixels, for `at_ns` on the page's clock.
+        pub fn propose(&mut self, min_x: f32, min_y: f32, max_x: f32, max_y: f32, at_ns: f64) -> Result<(), JsError> {
+            self.inner.propose([min_x, min_y], [max_x, max_y], at_ns).map_err(js)
+        }
+
+        /// The wearer region the last frame was cropped in: [x0, y0, x1, y1] (edges), or empty.
+        pub fn region(&self) -> Vec<f32> {
+            self.inner.region()
+        }
+
+        /// `whole frame`, `tracking` or `ego signals`.
         #[wasm_bindgen(getter, js_name = cropSource)]
         pub fn crop_source(&self) -> String {
             self.inner.crop_source().name().into()
@@ -372,7 +416,7 @@ mod tests {
         assert!(detector.detect(&[0; 4], 1.0).unwrap_err().to_string().contains("RGBA"));
         let blank = vec![0u8; side as usize * side as usize * 4];
         assert!(matches!(detector.detect(&blank, 1.0), Err(ObserveError::NoCrop)));
-        let draw = detector.crop(640, 480).unwrap();
+        let draw = detector.crop(640, 480, 1_764_600_000_000_000_000.0).unwrap().unwrap();
         // The whole frame, letterboxed into the square input.
         assert_eq!(draw.source, [0.0, 0.0, 640.0, 480.0]);
         assert_eq!(detector.crop_source(), CropSource::WholeFrame);
@@ -385,5 +429,37 @@ mod tests {
         assert_eq!(detector.window(), vec![0.0, -80.0, 640.0]);
         assert_eq!(detector.counts().0, 1);
         assert!(matches!(detector.detect(&blank, f64::NAN), Err(ObserveError::Timestamp(_))));
+    }
+
+    #[test]
+    fn a_watching_pages_wearer_region_is_where_the_next_frames_are_cropped() {
+        let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models");
+        let manifest = std::fs::read(models.join("manifest.json")).unwrap();
+        let mut detector = LiveDetector::load(&manifest, |file| std::fs::read(models.join(file)).ok()).unwrap();
+        let side = detector.input_size() as usize;
+        let at = 1_764_600_000_000_000_000.0;
+        let blank = vec![0u8; side * side * 4];
+        // The first frame: nobody found, and no region yet.
+        detector.crop(640, 480, at - 1e8).unwrap();
+        assert_eq!(detector.crop_source(), CropSource::WholeFrame);
+        detector.detect(&blank, at - 1e8).unwrap();
+        assert_eq!(detector.region(), Vec::<f32>::new());
+        detector.propose([200.0, 100.0], [300.0, 400.0], at).unwrap();
+        // A frame 0.2 s later is cropped in the region (the square around it).
+        let draw = detector.crop(640, 480, at + 2e8).unwrap().unwrap();
+        assert_eq!(detector.crop_source(), CropSource::EgoSignals);
+        let [sx, sy, sw, sh] = draw.source;
+        let e = 1e-3;
+        assert!(sx <= 200.5 + e && sx + sw >= 300.5 - e && sy <= 100.5 + e && sy + sh >= 400.5 - e, "{draw:?}");
+        assert!(sw < 640.0, "{draw:?}");
+        detector.detect(&blank, at + 2e8).unwrap();
+        assert_eq!(detector.region(), vec![200.5, 100.5, 300.5, 400.5]);
+        // A second later the region is stale: the whole frame (nobody found on a black crop).
+        detector.crop(640, 480, at + 1.2e9).unwrap();
+        assert_eq!(detector.crop_source(), CropSource::WholeFrame);
+        // What a relay could not have sent is refused, saying what it was.
+        let err = detector.propose([f32::NAN, 0.0], [10.0, 10.0], at).unwrap_err().to_string();
+        assert!(err.contains("wearer region"), "{err}");
+        assert!(matches!(detector.propose([0.0, 0.0], [1.0, 1.0], f64::INFINITY), Err(ObserveError::Timestamp(_))));
     }
 }

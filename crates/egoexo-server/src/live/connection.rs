@@ -10,7 +10,7 @@ use std::time::Duration;
 use axum::extract::ws::{CloseFrame, Message, WebSocket};
 use egoexo_protocol::live::{
     ClientMessage, Close, CloseKind, DeviceHello, DeviceRole, Join, LIVE_PROTOCOL_VERSION, LIVE_SUBPROTOCOL,
-    MAX_MESSAGE_BYTES, MAX_WORLD_MESSAGE_CHARS, RelayMessage, valid_device_id,
+    MAX_MESSAGE_BYTES, MAX_WORLD_MESSAGE_CHARS, RelayMessage, region_problem, valid_device_id,
 };
 use futures::stream::{SplitSink, SplitStream};
 use futures::{SinkExt, StreamExt};
@@ -294,6 +294,16 @@ impl Reader {
                             ));
                         }
                         self.room.observer_world(&device, self.client, state, message);
+                        Ok(Handled::Nothing)
+                    }
+                    ClientMessage::WearerRegion { device, region, at_ns } => {
+                        if self.device.is_some() {
+                            return Err(Close::new(CloseKind::NotAllowed, "only viewers propose a wearer's region"));
+                        }
+                        if let Some(problem) = region_problem(&region) {
+                            return Err(Close::new(CloseKind::Malformed, problem));
+                        }
+                        self.room.wearer_region(&device, self.client, region, at_ns);
                         Ok(Handled::Nothing)
                     }
                 }

@@ -6,6 +6,7 @@ use std::sync::{Arc, Mutex};
 
 use bytes::{Bytes, BytesMut};
 use egoexo_core::camera::CameraCalibration;
+use egoexo_core::region::BoundingBox;
 use egoexo_protocol::live::{
     ChannelInfo, Close, CloseKind, DataFrame, DeviceHello, DeviceRole, DeviceStatus, HEADER_BYTES, RelayMessage,
     RoomId, Stream, WorldState,
@@ -330,6 +331,21 @@ impl Room {
         let inner = self.lock();
         if let Some(DeviceState { role: DeviceRole::Observer, outbox: Some(outbox), .. }) = inner.devices.get(device) {
             outbox.push_message(to_json(&RelayMessage::ObserverWorld { viewer, state, message }));
+        }
+    }
+
+    /// Viewer `viewer`'s proposal of where observer `device`'s wearer is in its image at relay
+    /// time `at_ns`, passed to that observer on its own clock (dropped when it is no observer,
+    /// not connected, or has not answered a ping: its clock is not known).
+    pub fn wearer_region(&self, device: &str, viewer: u32, region: BoundingBox, at_ns: i64) {
+        let inner = self.lock();
+        if let Some(DeviceState { role: DeviceRole::Observer, outbox: Some(outbox), clock, .. }) =
+            inner.devices.get(device)
+            && let Some(offset_ns) = clock.offset_ns()
+        {
+            // The offset is relay minus device.
+            let at_ns = at_ns.saturating_sub(offset_ns);
+            outbox.push_message(to_json(&RelayMessage::WearerRegion { viewer, region, at_ns }));
         }
     }
 

@@ -10,6 +10,7 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 use egoexo_core::camera::{CameraCalibration, Pinhole, Projection};
 use egoexo_core::exo_keypoints::Keypoint2d;
 use egoexo_core::glam::{Quat, Vec2, Vec3};
+use egoexo_core::region::BoundingBox;
 use egoexo_core::rigid::RigidTransform;
 use egoexo_protocol::live::{
     ChannelInfo, ClientMessage, CloseKind, DataFrame, DeviceHello, DeviceMount, DeviceRole, DeviceStatus, DeviceWorld,
@@ -794,6 +795,65 @@ async fn a_viewers_word_on_an_observers_world_reaches_that_observer_only() {
     let (code, reason) = viewer.closed().await;
     assert_eq!(code, CloseKind::Malformed.code(), "{reason}");
     assert!(reason.contains("observer-world"), "{reason}");
+    wearer.send_frame(Stream::Head, pose(0.0));
+    assert!(!matches!(wearer.next(Duration::from_millis(300)).await, Some(Heard::Closed(_))));
+}
+
+/// The wearer regions a client heard: (viewer, region, time on its clock).
+fn regions_heard(heard: &[Heard]) -> Vec<(u32, BoundingBox, i64)> {
+    heard
+        .iter()
+        .filter_map(|h| match h {
+            Heard::Message(RelayMessage::WearerRegion { viewer, region, at_ns }) => Some((*viewer, *region, *at_ns)),
+            _ => None,
+        })
+        .collect()
+}
+
+#[tokio::test]
+async fn a_viewers_wearer_region_reaches_that_observer_on_its_own_clock() {
+    let relay = relay(test_limits()).await;
+    let room = create_room(relay.addr).await;
+    let mut viewer = welcomed_viewer(relay.addr, &room).await;
+    let mut wearer = head_wearer(relay.addr, &room).await;
+    // A camera whose clock runs 5 s ahead of the relay's.
+    const AHEAD_NS: i64 = 5_000_000_000;
+    let tripod = device_hello(device_join(&room), "tripod", DeviceRole::Observer, &[Stream::Keypoints]);
+    let mut camera = Client::connect(relay.addr, tripod, AHEAD_NS, true).await;
+    camera.welcome().await;
+    // Its clock is known once it has answered a ping (the relay pings on joining).
+    camera.listen_until(Duration::from_secs(10), Duration::from_millis(200), |h| {
+        h.iter().any(|h| matches!(h, Heard::Message(RelayMessage::Ping { .. })))
+    })
+    .await;
+    let region = BoundingBox { min: Vec2::new(120.0, 30.0), max: Vec2::new(300.0, 470.0) };
+    let at_ns = now_ns();
+    let propose = |device: &str, region: BoundingBox| {
+        json(&ClientMessage::WearerRegion { device: device.into(), region, at_ns })
+    };
+    // One for the wearer (not an observer) and one for nobody are dropped.
+    viewer.send(propose("wearer", region));
+    viewer.send(propose("nobody", region));
+    viewer.send(propose("tripod", region));
+    let heard =
+        camera.listen_until(Duration::from_secs(10), Duration::from_millis(300), |h| !regions_heard(h).is_empty()).await;
+    let regions = regions_heard(&heard);
+    assert_eq!(regions.len(), 1, "{regions:?}");
+    let (_, got, device_ns) = regions[0];
+    assert_eq!(got, region);
+    // On the camera's clock, to within the loopback round trip of the clock estimate.
+    let off_ms = (device_ns - (at_ns + AHEAD_NS)) as f64 / 1e6;
+    assert!(off_ms.abs() < 50.0, "the region's time is {off_ms} ms off the camera's clock");
+    assert!(regions_heard(&wearer.listen(Duration::from_millis(300)).await).is_empty(), "the wearer heard a region");
+    // Only viewers propose, and only boxes: a device that does is closed, as is a viewer
+    // proposing a box that is not one (the others carry on).
+    camera.send(propose("tripod", region));
+    let (code, reason) = camera.closed().await;
+    assert_eq!(code, CloseKind::NotAllowed.code(), "{reason}");
+    viewer.send(propose("tripod", BoundingBox { min: region.max, max: region.min }));
+    let (code, reason) = viewer.closed().await;
+    assert_eq!(code, CloseKind::Malformed.code(), "{reason}");
+    assert!(reason.contains("wearer region"), "{reason}");
     wearer.send_frame(Stream::Head, pose(0.0));
     assert!(!matches!(wearer.next(Duration::from_millis(300)).await, Some(Heard::Closed(_))));
 }

@@ -18,7 +18,7 @@ use wasm_bindgen_futures::spawn_local;
 use web_sys::{BinaryType, CloseEvent, MessageChannel, MessageEvent, WebSocket};
 
 use super::{Event, Runtime, yield_on};
-use crate::live::{LiveReconstructor, WorldReports};
+use crate::live::{LiveReconstructor, ObserverRegion, RegionReports, WorldReports};
 
 #[wasm_bindgen]
 extern "C" {
@@ -32,6 +32,8 @@ pub(super) struct LiveConnection {
     pub(super) reconstructor: LiveReconstructor,
     /// What this viewer told each observer about its registration.
     world_reports: WorldReports,
+    /// When this viewer last told each observer where it sees the wearer.
+    region_reports: RegionReports,
     /// Whether the reconstruction loop is running.
     reconstructing: Cell<bool>,
     /// Yields of the reconstruction loop (its own channel: the job loop has another).
@@ -101,6 +103,7 @@ pub(super) fn join(runtime: &Rc<Runtime>, url: &str, room: String, secret: Strin
         socket,
         reconstructor: LiveReconstructor::new(fps, lookahead),
         world_reports: WorldReports::default(),
+        region_reports: RegionReports::default(),
         reconstructing: Cell::new(false),
         channel,
         _on_open: on_open,
@@ -190,6 +193,7 @@ async fn reconstruct_loop(runtime: Rc<Runtime>) {
             Ok(Some((frame, lookahead, compute_ms))) => {
                 let info = LiveFrameInfo { compute_ms, posted_ms: runtime.clock_ms(), ..frame.info(lookahead) };
                 report_worlds(&runtime, &info);
+                report_regions(&runtime, &frame.wearer_regions);
                 runtime.post(WorkerEvent::LiveFrame { scene: JsBytes::copy_from(&frame.scene_json), frame: info });
             }
             Ok(None) => break,
@@ -211,6 +215,20 @@ fn report_worlds(runtime: &Runtime, info: &LiveFrameInfo) {
     let mut live = runtime.live.borrow_mut();
     let Some(connection) = live.as_mut() else { return };
     for report in connection.world_reports.due(&info.observer_worlds, now_ms) {
+        if let Ok(text) = serde_json::to_string(&report) {
+            let _ = connection.socket.send_with_str(&text);
+        }
+    }
+}
+
+/// Tells each observer placed in a wearer's world where this viewer sees the wearer in its
+/// image (through the relay, which maps the time onto the observer's clock; [`RegionReports`]
+/// says when), so a camera page crops there.
+fn report_regions(runtime: &Runtime, regions: &[ObserverRegion]) {
+    let Some(now_ms) = runtime.clock_ms() else { return };
+    let mut live = runtime.live.borrow_mut();
+    let Some(connection) = live.as_mut() else { return };
+    for report in connection.region_reports.due(regions, now_ms) {
         if let Ok(text) = serde_json::to_string(&report) {
             let _ = connection.socket.send_with_str(&text);
         }

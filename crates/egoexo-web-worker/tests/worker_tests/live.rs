@@ -424,7 +424,31 @@ fn a_static_camera_without_a_pose_streams_keypoints_only_and_is_registered_in_si
     assert!(after_s <= 15.0, "registered {after_s:.1} s into the stream");
     for f in &shown[..at] {
         assert!(f.exo_observers.is_empty(), "frame {} fused {:?} before registration", f.frame, f.exo_observers);
+        assert!(f.wearer_regions.is_empty(), "frame {} proposed a region before registration", f.frame);
     }
+    // Once placed, the camera is told where the wearer is in its image (the region its page
+    // crops): around the true head there, down to the legs.
+    let filmed = &posed.observers[0];
+    let t_camera_world = filmed.camera.t_world_camera(&filmed.head.poses[0]).inverse();
+    let truth_px = |at_ns: i64, below_m: f32| {
+        let head = &posed.wearer.head;
+        let i = head.timestamps_ns.partition_point(|&t| t < at_ns).min(head.poses.len() - 1);
+        let p = head.poses[i].translation - egoexo_core::glam::Vec3::Y * below_m;
+        filmed.camera.project(t_camera_world.transform_point(p)).filter(|&px| filmed.camera.is_valid_pixel(px))
+    };
+    let (mut proposed, mut checked) = (0, 0);
+    for f in &shown[at..] {
+        let Some(r) = f.wearer_regions.iter().find(|r| r.observer == filmed.id) else { continue };
+        proposed += 1;
+        for (below_m, what) in [(0.0, "head"), (1.2, "legs")] {
+            if let Some(px) = truth_px(r.at_ns, below_m) {
+                checked += 1;
+                assert!(r.region.contains(px), "frame {}: the true {what} at {px} is outside {:?}", f.frame, r.region);
+            }
+        }
+    }
+    eprintln!("{proposed} of {} frames after registration proposed a region; {checked} true points inside", shown.len() - at);
+    assert!(proposed * 10 >= (shown.len() - at) * 9 && checked > proposed, "{proposed} regions, {checked} points checked");
     // Where it stands: the truth within 5 cm and 2° of heading.
     let o = &shown.last().unwrap().observer_worlds[0];
     let t = &truth[0];

@@ -135,8 +135,13 @@ async fn record(server: &ServerAddress, join: egoexo_protocol::live::Join, args:
                     let pong = ClientMessage::Pong { relay_ns, device_ns: client::system_ns() };
                     socket.send(client::json(&pong)).await?;
                 }
-                // A recorder is a viewer: words on observers' worlds go to observers.
-                Ok(RelayMessage::Welcome { .. } | RelayMessage::ObserverWorld { .. }) => {}
+                // A recorder is a viewer: words on observers' worlds and their wearer regions go
+                // to observers.
+                Ok(
+                    RelayMessage::Welcome { .. }
+                    | RelayMessage::ObserverWorld { .. }
+                    | RelayMessage::WearerRegion { .. },
+                ) => {}
                 Err(e) => bail!("a message from the relay: {e}"),
             },
             Some(Ok(Message::Close(frame))) => {

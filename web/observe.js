@@ -33,6 +33,16 @@ const nowNs = () => (performance.timeOrigin + performance.now()) * 1e6;
 
 const page = { form: null, run: null }; // form: the JoinForm (made once the wasm module is in)
 
+// Detectors side by side, each in its own worker (tract runs one thread in each); a frame
+// goes to whichever is free, so one detector's 50–70 ms (wasm, a laptop core) no longer caps
+// the rate near 12 frames/s. Two, where the device has two cores or more (a phone has 6–8);
+// more would take the cores the camera and the browser need. `?detectors=1` runs one.
+function detectorCount(params) {
+  const asked = Number(params.get('detectors'));
+  if (Number.isInteger(asked) && asked >= 1 && asked <= 4) return asked;
+  return Math.min(2, Math.max(1, navigator.hardwareConcurrency ?? 1));
+}
+
 // Keeps the screen on while observing: a phone on a stand would dim, lock and stop its camera.
 // The Screen Wake Lock API; the browser lets go of the lock whenever the page is hidden, so it
 // is taken again when the page is shown. `document.body.dataset.screen` says where it stands
@@ -106,9 +116,9 @@ class Rate {
   }
 }
 
-// One run: the camera, the detector worker and the socket, reconnected on retryable closes.
+// One run: the camera, the detector workers and the socket, reconnected on retryable closes.
 class Observation {
-  constructor(join, deviceId, target, stream) {
+  constructor(join, deviceId, target, stream, detectors) {
     this.join = join;
     this.joinLabel = join.label;
     this.deviceId = deviceId;
@@ -134,12 +144,14 @@ class Observation {
       // cropped there (the worker checks it).
       onWearerRegion: (region) => {
         this.regions += 1;
-        this.worker?.postMessage({ type: 'region', min: region.region.min, max: region.region.max, atNs: region.at_ns });
+        for (const d of this.detectors) {
+          d.worker.postMessage({ type: 'region', min: region.region.min, max: region.region.max, atNs: region.at_ns });
+        }
       },
     });
-    this.worker = null;
-    this.workerReady = false;
-    this.busy = false;
+    this.detectorCount = detectors;
+    // Each: {worker, ready, busy, frames, found}.
+    this.detectors = [];
     this.bones = new Uint8Array();
     this.captured = new Rate();
     this.detected = new Rate();
@@ -171,9 +183,13 @@ class Observation {
       (this.focalKnown ? `, ${fov}° wide` : ' (field of view unknown: focal length guessed, registration refines it)');
     ui.overlay.width = this.width;
     ui.overlay.height = this.height;
-    this.worker = new Worker(new URL('observe-worker.js', import.meta.url), { type: 'module' });
-    this.worker.onmessage = (event) => this.onWorker(event.data);
-    this.worker.onerror = (event) => this.fail(`The detector stopped: ${event.message ?? 'an error in its worker'}`);
+    for (let i = 0; i < this.detectorCount; i += 1) {
+      const detector = { worker: null, ready: false, busy: false, frames: 0, found: 0 };
+      detector.worker = new Worker(new URL('observe-worker.js', import.meta.url), { type: 'module' });
+      detector.worker.onmessage = (event) => this.onWorker(detector, event.data);
+      detector.worker.onerror = (event) => this.fail(`The detector stopped: ${event.message ?? 'an error in its worker'}`);
+      this.detectors.push(detector);
+    }
     this.track.addEventListener('ended', () => this.fail('The camera stopped (unplugged, or taken by another app).'));
     this.relay.connect();
     this.awake.hold();
@@ -194,29 +210,30 @@ class Observation {
     // while the page starts its detector), and its media time counts from the first.
     document.body.dataset.firstFrameMs ??= String(performance.timeOrigin
       + (metadata.captureTime ?? metadata.presentationTime ?? now) - 1000 * (metadata.mediaTime ?? 0));
-    // One frame at a time in the detector: a frame that arrives while it is busy is skipped,
-    // so what is sent is never stale.
-    if (!this.workerReady || this.busy || !this.relay.open) return;
+    // One frame at a time in each detector: a frame that arrives while all are busy is
+    // skipped, so what is sent is never stale.
+    const free = this.detectors.find((d) => d.ready && !d.busy);
+    if (!free || !this.relay.open) return;
     const stampNs = observeFrameTimeNs(performance.timeOrigin, metadata.captureTime ?? Number.NaN,
       metadata.presentationTime ?? now);
     if (stampNs === undefined) return;
-    this.busy = true;
+    free.busy = true;
     createImageBitmap(ui.video).then((bitmap) => {
       if (this.ended) {
         bitmap.close();
         return;
       }
-      this.worker.postMessage({ type: 'frame', bitmap, stampNs }, [bitmap]);
+      free.worker.postMessage({ type: 'frame', bitmap, stampNs }, [bitmap]);
     }).catch((error) => {
-      this.busy = false;
+      free.busy = false;
       console.warn('egoexo observe: a frame could not be read:', message(error));
     });
   }
 
-  onWorker(data) {
+  onWorker(detector, data) {
     if (this.ended) return;
     if (data.type === 'ready') {
-      this.workerReady = true;
+      detector.ready = true;
       this.bones = data.bones;
       return;
     }
@@ -225,7 +242,9 @@ class Observation {
       return;
     }
     if (data.type !== 'keypoints') return;
-    this.busy = false;
+    detector.busy = false;
+    detector.frames = data.frames;
+    detector.found = data.found;
     this.detected.tick();
     this.detectMs.push(data.detectMs);
     if (this.detectMs.length > 30) this.detectMs.shift();
@@ -246,7 +265,7 @@ class Observation {
     this.awake.release();
     this.showStats();
     this.relay.close(closeReason);
-    this.worker?.terminate();
+    for (const d of this.detectors) d.worker.terminate();
     for (const track of this.stream.getTracks()) track.stop();
     ui.connection.textContent = 'not connected';
     if (page.run === this) page.run = null;
@@ -306,10 +325,14 @@ class Observation {
     const ms = [...this.detectMs].sort((a, b) => a - b);
     const median = ms.length ? ms[Math.floor(ms.length / 2)] : null;
     const last = this.last;
-    ui.detectRate.textContent = ended || !this.workerReady
-      ? (this.workerReady ? '—' : 'loading the detector…')
-      : `${this.detected.hz} frames/s${median === null ? '' : `, ${median.toFixed(0)} ms each`}` +
-        (last ? `; someone found in ${last.found} of ${last.frames} frames` : '');
+    const ready = this.detectors.some((d) => d.ready);
+    const frames = this.detectors.reduce((n, d) => n + d.frames, 0);
+    const found = this.detectors.reduce((n, d) => n + d.found, 0);
+    const side = this.detectors.length > 1 ? ` by ${this.detectors.length} detectors side by side` : '';
+    ui.detectRate.textContent = ended || !ready
+      ? (ready ? '—' : 'loading the detector…')
+      : `${this.detected.hz} frames/s${median === null ? '' : `, ${median.toFixed(0)} ms each`}${side}` +
+        (frames ? `; someone found in ${found} of ${frames} frames` : '');
     ui.cropSource.textContent = ended || !last ? '—' : last.cropSource;
     document.body.dataset.cropSource = last ? last.cropSource : '';
     document.body.dataset.regions = String(this.regions);
@@ -321,7 +344,7 @@ class Observation {
     ui.registration.textContent = ended ? '—'
       : world ? world.message : 'waiting for a page watching the room to register this camera';
     document.body.dataset.registration = ended || !world ? 'none' : world.state;
-    document.body.dataset.detections = last ? String(last.found) : '0';
+    document.body.dataset.detections = String(found);
   }
 }
 
@@ -355,7 +378,8 @@ async function startObserving() {
     return;
   }
   listCameras();
-  const run = new Observation(join, deviceId, ui.target.value.trim(), stream);
+  const detectors = detectorCount(new URLSearchParams(location.search));
+  const run = new Observation(join, deviceId, ui.target.value.trim(), stream, detectors);
   page.run = run;
   page.form.running(true);
   try {

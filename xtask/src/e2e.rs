@@ -339,6 +339,22 @@ pub fn run_live_bench(root: &Path, run: &BrowserRun, seconds: u32) -> Result<ser
     serde_json::from_str(line).with_context(|| format!("LIVEBENCH result `{line}`"))
 }
 
+/// Serves `dist/` and runs the observer page's detection bench (`tests/e2e/observe-bench.mjs`):
+/// the page alone with a film as its camera, one detector and two, `seconds` of readings each.
+/// Returns its `OBSERVEBENCH` JSON.
+pub fn run_observe_bench(root: &Path, run: &BrowserRun, seconds: u32) -> Result<serde_json::Value> {
+    std::fs::create_dir_all(&run.out)?;
+    let server = run.serve(root, 0)?;
+    let script = root.join("tests").join("e2e").join("observe-bench.mjs");
+    let out = cmd::output_checked(run.node(root, &server.url).arg(&script).arg(seconds.to_string()))?;
+    let line = out
+        .lines()
+        .rev()
+        .find_map(|l| l.strip_prefix("OBSERVEBENCH "))
+        .context("the observer page's bench printed no OBSERVEBENCH line")?;
+    serde_json::from_str(line).with_context(|| format!("OBSERVEBENCH result `{line}`"))
+}
+
 /// The relay under load on loopback (`egoexo live load`, which starts its own server):
 /// `streams` device streams (10 rooms) at 30 Hz for `seconds`. Returns its JSON report.
 pub fn run_relay_load(egoexo: &Path, streams: usize, seconds: u32) -> Result<serde_json::Value> {

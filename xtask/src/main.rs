@@ -154,8 +154,30 @@ fn main() -> Result<()> {
             let points = web.networks.as_ref().and_then(|n| n["points"].as_u64()).unwrap_or(3) as u8;
             let native_networks = e2e::run_native_networks(&models, points, 30)?;
             print_network_table(web.networks.as_ref(), &native_networks);
+            let observe = e2e::run_observe_bench(&root, &run, OBSERVE_BENCH_SECONDS)?;
+            print_observe_bench(&observe);
             Ok(())
         }
+    }
+}
+
+/// Seconds of once-a-second readings of the observer page's detection rate per detector count.
+const OBSERVE_BENCH_SECONDS: u32 = 10;
+
+/// The observer page's detection rate, one detector and two side by side (`OBSERVEBENCH`).
+fn print_observe_bench(observe: &serde_json::Value) {
+    println!("observer page alone (a film as its camera), detection rate over {} s:", observe["seconds"]);
+    for row in observe["rows"].as_array().into_iter().flatten() {
+        let goal = observe["goal_fps"].as_f64().unwrap_or(15.0);
+        let fps = row["median_fps"].as_f64().unwrap_or(f64::NAN);
+        println!(
+            "  {} detector(s): median {fps:.0} frames/s (lowest {}, highest {}), {} ms a detection — goal ≥ {goal:.0}/s {}",
+            row["detectors"],
+            row["min_fps"],
+            row["max_fps"],
+            row["median_ms"],
+            if fps >= goal { "met" } else { "missed" },
+        );
     }
 }
 

@@ -320,7 +320,12 @@ mod bindings {
         /// `Float32Array` [sx, sy, sw, sh, dx, dy, dw, dh] for `drawImage`, empty when the
         /// window misses the frame.
         pub fn crop(&mut self, width: u32, height: u32, timestamp_ns: f64) -> Result<Vec<f32>, JsError> {
-            Ok(self.inner.crop(width, height, timestamp_ns).map_err(js)?.map(|d| [d.source, d.dest].concat()).unwrap_or_default())
+            Ok(self
+                .inner
+                .crop(width, height, timestamp_ns)
+                .map_err(js)?
+                .map(|d| [d.source, d.dest].concat())
+                .unwrap_or_default())
         }
 
         /// A watching page's wearer region (the relay's `wearer-region`): corners in

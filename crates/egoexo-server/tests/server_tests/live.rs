@@ -822,21 +822,22 @@ async fn a_viewers_wearer_region_reaches_that_observer_on_its_own_clock() {
     let mut camera = Client::connect(relay.addr, tripod, AHEAD_NS, true).await;
     camera.welcome().await;
     // Its clock is known once it has answered a ping (the relay pings on joining).
-    camera.listen_until(Duration::from_secs(10), Duration::from_millis(200), |h| {
-        h.iter().any(|h| matches!(h, Heard::Message(RelayMessage::Ping { .. })))
-    })
-    .await;
+    camera
+        .listen_until(Duration::from_secs(10), Duration::from_millis(200), |h| {
+            h.iter().any(|h| matches!(h, Heard::Message(RelayMessage::Ping { .. })))
+        })
+        .await;
     let region = BoundingBox { min: Vec2::new(120.0, 30.0), max: Vec2::new(300.0, 470.0) };
     let at_ns = now_ns();
-    let propose = |device: &str, region: BoundingBox| {
-        json(&ClientMessage::WearerRegion { device: device.into(), region, at_ns })
-    };
+    let propose =
+        |device: &str, region: BoundingBox| json(&ClientMessage::WearerRegion { device: device.into(), region, at_ns });
     // One for the wearer (not an observer) and one for nobody are dropped.
     viewer.send(propose("wearer", region));
     viewer.send(propose("nobody", region));
     viewer.send(propose("tripod", region));
-    let heard =
-        camera.listen_until(Duration::from_secs(10), Duration::from_millis(300), |h| !regions_heard(h).is_empty()).await;
+    let heard = camera
+        .listen_until(Duration::from_secs(10), Duration::from_millis(300), |h| !regions_heard(h).is_empty())
+        .await;
     let regions = regions_heard(&heard);
     assert_eq!(regions.len(), 1, "{regions:?}");
     let (_, got, device_ns) = regions[0];

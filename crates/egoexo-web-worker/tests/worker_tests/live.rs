@@ -447,8 +447,14 @@ fn a_static_camera_without_a_pose_streams_keypoints_only_and_is_registered_in_si
             }
         }
     }
-    eprintln!("{proposed} of {} frames after registration proposed a region; {checked} true points inside", shown.len() - at);
-    assert!(proposed * 10 >= (shown.len() - at) * 9 && checked > proposed, "{proposed} regions, {checked} points checked");
+    eprintln!(
+        "{proposed} of {} frames after registration proposed a region; {checked} true points inside",
+        shown.len() - at
+    );
+    assert!(
+        proposed * 10 >= (shown.len() - at) * 9 && checked > proposed,
+        "{proposed} regions, {checked} points checked"
+    );
     // Where it stands: the truth within 5 cm and 2° of heading.
     let o = &shown.last().unwrap().observer_worlds[0];
     let t = &truth[0];

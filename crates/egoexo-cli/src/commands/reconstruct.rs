@@ -37,8 +37,9 @@ pub struct Args {
     /// Models folder [default: ./models, else the repository's models/].
     #[arg(long)]
     pub models: Option<PathBuf>,
-    /// Wearer tracking [default: 3 when both wrists are tracked on at least 98% of the head's
-    /// frames, else 1 — wrists from hand tracking come and go].
+    /// Wearer tracking [default: 3 whenever the session has a wrist — the network reads, frame
+    /// by frame, which wrists are tracked, so hand-tracking wrists that come and go are used
+    /// where they exist — else 1].
     #[arg(long, value_enum)]
     pub tracking: Option<TrackingArg>,
     /// Output frame rate.

@@ -2,7 +2,8 @@
 //! share and upload it (the same container and envelope as the page's Share button; the key
 //! stays in the printed link). The input may also be a reconstruction already shared: a
 //! folder written by `share get`, re-shared as it is. `egoexo share get <link> -o DIR`:
-//! download, open and unpack a share, with the motion in every export format.
+//! download, open and unpack a share, with the motion in every export format. `egoexo share
+//! delete <link> --token T`: delete it before it expires, with the token `share` printed.
 
 use std::path::PathBuf;
 
@@ -38,6 +39,8 @@ pub struct Args {
 pub enum ShareCommand {
     /// Download a share by its link, decrypt it and write its files into a folder.
     Get(GetArgs),
+    /// Delete a share before it expires, with the delete token printed when it was made.
+    Delete(DeleteArgs),
 }
 
 #[derive(clap::Args)]
@@ -73,6 +76,18 @@ pub struct GetArgs {
     pub force: bool,
 }
 
+#[derive(clap::Args)]
+pub struct DeleteArgs {
+    /// The share link (`https://host/#share=<id>.<key>`).
+    pub link: String,
+    /// The delete token `egoexo share` printed (the page keeps its own in the browser).
+    #[arg(long)]
+    pub token: String,
+    /// The API's server, when it is not the page's own origin.
+    #[arg(long)]
+    pub server: Option<String>,
+}
+
 fn parse_expiry(text: &str) -> Result<Expiry, String> {
     Expiry::parse(text)
 }
@@ -92,6 +107,7 @@ fn api_failure(what: &str, status: u16, body: &[u8]) -> anyhow::Error {
 pub fn run(args: Args) -> Result<()> {
     match args.command {
         Some(ShareCommand::Get(get)) => run_get(get),
+        Some(ShareCommand::Delete(delete)) => run_delete(delete),
         None => run_create(args.session.context("a session to share is required")?, args.create),
     }
 }
@@ -203,13 +219,35 @@ fn reconstruct_and_pack(session: &std::path::Path, args: &CreateArgs) -> Result<
     Ok((container, what))
 }
 
-fn run_get(args: GetArgs) -> Result<()> {
-    let link = ShareLink::parse(&args.link).map_err(anyhow::Error::msg)?;
-    let api = match &args.server {
-        Some(server) => server.clone(),
+/// The link and the share's API address (`--server`, else the link's origin).
+fn share_at(link: &str, server: Option<&str>) -> Result<(ShareLink, String)> {
+    let link = ShareLink::parse(link).map_err(anyhow::Error::msg)?;
+    let api = match server {
+        Some(server) => server.to_string(),
         None => link.page_origin().context("the link has no http(s) origin; pass --server")?.to_string(),
     };
     let url = link.api_url(&api);
+    Ok((link, url))
+}
+
+fn run_delete(args: DeleteArgs) -> Result<()> {
+    let (_, url) = share_at(&args.link, args.server.as_deref())?;
+    let mut response = agent()
+        .delete(&url)
+        .header("Authorization", &format!("Bearer {}", args.token.trim()))
+        .call()
+        .with_context(|| format!("cannot reach {url}"))?;
+    let status = response.status().as_u16();
+    let body = response.body_mut().read_to_vec()?;
+    if status != 204 {
+        return Err(api_failure("deleting the share", status, &body));
+    }
+    eprintln!("deleted: the link no longer opens");
+    Ok(())
+}
+
+fn run_get(args: GetArgs) -> Result<()> {
+    let (link, url) = share_at(&args.link, args.server.as_deref())?;
     let mut response = agent().get(&url).call().with_context(|| format!("cannot reach {url}"))?;
     let status = response.status().as_u16();
     let body = response.body_mut().with_config().limit(1 << 34).read_to_vec()?;

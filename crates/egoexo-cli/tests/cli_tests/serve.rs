@@ -64,6 +64,7 @@ fn a_session_shared_from_the_cli_comes_back_through_share_get() {
         "--models",
         &models.display().to_string(),
     ]);
+    let first_stderr = out.stderr.clone();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stderr}");
     let link = String::from_utf8(out.stdout).unwrap().trim().to_string();
@@ -114,6 +115,29 @@ fn a_session_shared_from_the_cli_comes_back_through_share_get() {
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("key is wrong") || stderr.contains("not 22 characters"), "{stderr}");
+
+    // `share delete` with the printed token: a wrong token is refused, the right one deletes it.
+    let token = stderr_token(&String::from_utf8_lossy(&first_stderr));
+    let out = egoexo(&["share", "delete", &link, "--token", "AAAAAAAAAAAAAAAAAAAAAA"]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("deleting the share") && stderr.contains("403"), "{stderr}");
+    let out = egoexo(&["share", "delete", &link, "--token", &token]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = egoexo(&["share", "get", &link, "-o", &folder.path().join("y").display().to_string()]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("404"), "{stderr}");
+}
+
+/// The delete token `egoexo share` printed on stderr.
+fn stderr_token(stderr: &str) -> String {
+    stderr
+        .lines()
+        .find_map(|l| l.strip_prefix("delete token (keep it to delete the share): "))
+        .unwrap_or_else(|| panic!("no delete token in {stderr}"))
+        .trim()
+        .to_string()
 }
 
 /// Bounds a child process's life; killed when dropped.

@@ -2,6 +2,7 @@
 
 mod common;
 mod detect;
+mod docs_flags;
 mod live;
 mod mocap;
 mod participants;

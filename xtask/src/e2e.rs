@@ -327,32 +327,30 @@ pub fn run_native_networks(models: &Path, points: u8, runs: u32) -> Result<serde
 /// mode fed by `egoexo live replay`, `seconds` at each lookahead. Returns its `LIVEBENCH`
 /// JSON.
 pub fn run_live_bench(root: &Path, run: &BrowserRun, seconds: u32) -> Result<serde_json::Value> {
-    std::fs::create_dir_all(&run.out)?;
-    let server = run.serve(root, 0)?;
-    let script = root.join("tests").join("e2e").join("live-bench.mjs");
-    let out = cmd::output_checked(run.node(root, &server.url).arg(&script).arg(seconds.to_string()))?;
-    let line = out
-        .lines()
-        .rev()
-        .find_map(|l| l.strip_prefix("LIVEBENCH "))
-        .context("the live bench printed no LIVEBENCH line")?;
-    serde_json::from_str(line).with_context(|| format!("LIVEBENCH result `{line}`"))
+    run_script_bench(root, run, "live-bench.mjs", seconds, "LIVEBENCH")
 }
 
 /// Serves `dist/` and runs the observer page's detection bench (`tests/e2e/observe-bench.mjs`):
 /// the page alone with a film as its camera, one detector and two, `seconds` of readings each.
 /// Returns its `OBSERVEBENCH` JSON.
 pub fn run_observe_bench(root: &Path, run: &BrowserRun, seconds: u32) -> Result<serde_json::Value> {
+    run_script_bench(root, run, "observe-bench.mjs", seconds, "OBSERVEBENCH")
+}
+
+/// Serves `dist/`, runs `tests/e2e/<script> <seconds>` and parses the JSON of its last line
+/// that starts with `<tag> `.
+fn run_script_bench(root: &Path, run: &BrowserRun, script: &str, seconds: u32, tag: &str) -> Result<serde_json::Value> {
     std::fs::create_dir_all(&run.out)?;
     let server = run.serve(root, 0)?;
-    let script = root.join("tests").join("e2e").join("observe-bench.mjs");
-    let out = cmd::output_checked(run.node(root, &server.url).arg(&script).arg(seconds.to_string()))?;
+    let path = root.join("tests").join("e2e").join(script);
+    let out = cmd::output_checked(run.node(root, &server.url).arg(&path).arg(seconds.to_string()))?;
+    let prefix = format!("{tag} ");
     let line = out
         .lines()
         .rev()
-        .find_map(|l| l.strip_prefix("OBSERVEBENCH "))
-        .context("the observer page's bench printed no OBSERVEBENCH line")?;
-    serde_json::from_str(line).with_context(|| format!("OBSERVEBENCH result `{line}`"))
+        .find_map(|l| l.strip_prefix(prefix.as_str()))
+        .with_context(|| format!("{script} printed no {tag} line"))?;
+    serde_json::from_str(line).with_context(|| format!("{tag} result `{line}`"))
 }
 
 /// The relay under load on loopback (`egoexo live load`, which starts its own server):

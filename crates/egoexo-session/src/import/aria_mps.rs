@@ -623,6 +623,12 @@ impl<'w> DeviceLoader<'w> {
         Ok(Observer { id: id.to_owned(), head, camera, keypoints, video: None, context_features: None, placement })
     }
 
+    /// How many device folders were loaded (static cameras, which have no clock of their own
+    /// here, not counted).
+    pub(crate) fn loaded(&self) -> usize {
+        self.synced.len()
+    }
+
     /// Errors unless every device was synced or none was; returns whether they were.
     pub(crate) fn finish(self) -> Result<bool, ImportError> {
         let (synced, unsynced): (Vec<_>, Vec<_>) = self.synced.iter().partition(|(_, s)| *s);
@@ -666,6 +672,27 @@ pub fn import_single_device(
     Ok((session, warnings))
 }
 
+/// What the import assumed when no device folder has a `time_sync.csv`: that the devices'
+/// timestamps of `clock` are one clock. True of the streams of one device, and of devices
+/// recorded on a shared clock; for glasses recorded on their own (MPS processes each alone),
+/// their samples would be paired across an unknown offset.
+fn unsynced_clocks_warning(root: &FileTree, devices: usize, clock: Clock) -> ImportWarning {
+    let assumed = match clock {
+        Clock::Device => "the devices' own clocks (`tracking_timestamp_us`) are taken as one clock: true only for \
+            devices recorded on a shared clock (Aria glasses recording together with TimeCode or SubGHz sync); \
+            for glasses recorded on their own, give every device folder its time_sync.csv, or import with \
+            `--clock utc`"
+            .to_string(),
+        Clock::Utc => "their UTC timestamps are taken as one clock: as good as the devices' wall clocks agreed \
+            when they recorded"
+            .to_string(),
+    };
+    ImportWarning {
+        file: root.display_path(""),
+        message: format!("no device folder has a {TIME_SYNC_FILE}: {devices} devices, and {assumed}"),
+    }
+}
+
 /// Imports the multi-device layout (see the module docs).
 pub fn import_multi_device(
     root: &FileTree,
@@ -693,7 +720,11 @@ pub fn import_multi_device(
             observers.push(devices.observer(root, &dir, &id, options)?);
         }
     }
-    devices.finish()?;
+    let devices_loaded = devices.loaded();
+    let synced = devices.finish()?;
+    if !synced && devices_loaded > 1 {
+        warnings.push(unsynced_clocks_warning(root, devices_loaded, options.clock));
+    }
     if observers.is_empty() {
         warnings.push(ImportWarning {
             file: root.display_path("observers/"),

@@ -100,6 +100,11 @@ fn aria_fixture_imports_in_session_conventions() {
     assert_eq!(s.subject.height_m, Some(1.70));
     let messages: Vec<String> = imported.warnings.iter().map(ToString::to_string).collect();
     assert!(messages.iter().any(|m| m.contains("kept the highest-scoring person")), "{messages:#?}");
+    // No time_sync.csv anywhere: the import says which clock it took as shared, and how to
+    // do otherwise.
+    let clocks = messages.iter().find(|m| m.contains("no device folder has a time_sync.csv")).expect("a clock warning");
+    assert!(clocks.contains("3 devices") && clocks.contains("taken as one clock"), "{clocks}");
+    assert!(clocks.contains("--clock utc"), "{clocks}");
 }
 
 /// Projecting the true keypoints with the *imported* observer pose and camera reproduces the

@@ -46,8 +46,9 @@ fn inspect_reports_devices_rates_observers_coverage_and_problems() {
         "Observers (2)",
         "camera fisheye624 1408×1408",
         "keypoints: 61 frames, 2.000 s, 30.0 Hz",
-        "Problems (1):",
+        "Problems (2):",
         "kept the highest-scoring person per frame",
+        "no device folder has a time_sync.csv: 3 devices",
     ] {
         assert!(out.contains(needle), "missing {needle:?} in\n{out}");
     }

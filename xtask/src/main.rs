@@ -55,6 +55,11 @@ enum Command {
         app: AppArgs,
         #[arg(long, default_value_t = 8080)]
         port: u16,
+        /// The address to listen on: 127.0.0.1 (this machine only) unless a device elsewhere
+        /// must reach it — `0.0.0.0` or the machine's LAN address lets anyone on the network
+        /// open the page, make rooms and upload shares (docs/hosting.md).
+        #[arg(long, default_value = "127.0.0.1")]
+        host: std::net::IpAddr,
     },
     /// Build the web app into dist/ only.
     Dist {
@@ -122,11 +127,15 @@ fn main() -> Result<()> {
             println!("node_modules (EGOEXO_NODE_MODULES): {}", n.node_modules.display());
             Ok(())
         }
-        Command::Serve { app, port } => {
+        Command::Serve { app, port, host } => {
+            if let Some(warning) = serve::exposure_warning(host) {
+                eprintln!("warning: {warning}");
+            }
             app.build(&root)?;
             let store = root.join("target").join("shares");
             let egoexo = serve::build_server(&root)?;
-            let running = serve::spawn(&egoexo, &root.join("dist"), &store, &format!("127.0.0.1:{port}"))?;
+            let listen = std::net::SocketAddr::new(host, port).to_string();
+            let running = serve::spawn(&egoexo, &root.join("dist"), &store, &listen)?;
             println!("egoexo is at {} (shares in {}; Ctrl-C to stop)", running.url, store.display());
             running.wait()
         }

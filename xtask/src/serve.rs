@@ -68,3 +68,32 @@ pub fn spawn(binary: &Path, dist: &Path, store: &Path, listen: &str) -> Result<R
     };
     Ok(Running { url: url.to_string(), child })
 }
+
+/// What serving on `host` exposes, for a host that is not loopback: anyone who can reach it
+/// can use the page, the share API and the live relay, over plain HTTP — where browsers give
+/// no camera or WebXR to a page that is not `localhost`.
+pub fn exposure_warning(host: std::net::IpAddr) -> Option<String> {
+    (!host.is_loopback()).then(|| {
+        format!(
+            "serving on {host}: anyone who can reach this machine can open the page, make live rooms and \
+             upload shares, over plain HTTP. Browsers give cameras and WebXR only to secure pages: for a \
+             headset or a phone, put a TLS proxy in front (docs/hosting.md) or use `adb reverse` to a \
+             loopback server (docs/live-protocol.md)."
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::exposure_warning;
+
+    #[test]
+    fn serving_beyond_loopback_says_what_it_exposes() {
+        assert_eq!(exposure_warning("127.0.0.1".parse().unwrap()), None);
+        assert_eq!(exposure_warning("::1".parse().unwrap()), None);
+        for host in ["0.0.0.0", "192.168.1.20", "::"] {
+            let warning = exposure_warning(host.parse().unwrap()).unwrap();
+            assert!(warning.contains(host) && warning.contains("TLS proxy"), "{warning}");
+        }
+    }
+}

@@ -12,6 +12,9 @@
 //! - `cargo xtask dist` — only builds `dist/`; `cargo xtask bench-web` — runs the bench page.
 
 mod cmd;
+// The docs name only flags `cargo xtask` has (a test).
+#[cfg(test)]
+mod docs_flags;
 mod e2e;
 #[cfg(test)]
 mod layers;

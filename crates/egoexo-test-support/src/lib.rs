@@ -100,3 +100,55 @@ pub fn pseudo_random_bytes(len: usize, seed: u64) -> Vec<u8> {
         })
         .collect()
 }
+
+/// A line of code shown in `README.md` or `docs/*.md`.
+#[derive(Clone, Debug)]
+pub struct DocCodeLine {
+    /// The document, relative to the repository root.
+    pub file: PathBuf,
+    /// Its line number (the first, for a line continued with `\`).
+    pub line: usize,
+    pub text: String,
+}
+
+/// Every line of a fenced code block (joined across `\` continuations) and every inline code
+/// span of `README.md` and `docs/*.md` (in that order, `docs/` sorted): what the docs tell a
+/// reader to type, for tests that check the commands exist.
+pub fn doc_code_lines(root: &Path) -> Vec<DocCodeLine> {
+    let mut files = vec![PathBuf::from("README.md")];
+    let mut docs: Vec<PathBuf> = std::fs::read_dir(root.join("docs"))
+        .expect("docs/")
+        .map(|e| e.expect("a docs/ entry").path())
+        .filter(|p| p.extension().is_some_and(|e| e == "md"))
+        .filter_map(|p| p.strip_prefix(root).ok().map(Path::to_path_buf))
+        .collect();
+    docs.sort();
+    files.extend(docs);
+    let mut out = Vec::new();
+    for file in files {
+        let text = std::fs::read_to_string(root.join(&file)).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+        let mut fenced = false;
+        let mut pending: Option<(usize, String)> = None;
+        for (n, line) in text.lines().enumerate() {
+            if line.trim_start().starts_with("```") {
+                fenced = !fenced;
+                continue;
+            }
+            if fenced {
+                let (at, joined) = match pending.take() {
+                    Some((at, before)) => (at, format!("{before} {}", line.trim())),
+                    None => (n + 1, line.trim().to_string()),
+                };
+                match joined.strip_suffix('\\') {
+                    Some(head) => pending = Some((at, head.to_string())),
+                    None => out.push(DocCodeLine { file: file.clone(), line: at, text: joined }),
+                }
+            } else {
+                for span in line.split('`').skip(1).step_by(2) {
+                    out.push(DocCodeLine { file: file.clone(), line: n + 1, text: span.to_string() });
+                }
+            }
+        }
+    }
+    out
+}

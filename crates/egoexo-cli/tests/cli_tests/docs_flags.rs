@@ -3,32 +3,11 @@
 //! subcommand's `--help` is asked for its flags.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use egoexo_test_support::workspace_root;
+use egoexo_test_support::{doc_code_lines, workspace_root};
 
 use crate::common::egoexo;
-
-/// One `egoexo …` command line of a document.
-#[derive(Debug)]
-struct DocCommand {
-    file: PathBuf,
-    line: usize,
-    args: Vec<String>,
-}
-
-/// The documents that show commands.
-fn documents(root: &Path) -> Vec<PathBuf> {
-    let mut files = vec![root.join("README.md")];
-    let mut docs: Vec<PathBuf> = std::fs::read_dir(root.join("docs"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "md"))
-        .collect();
-    docs.sort();
-    files.extend(docs);
-    files
-}
 
 /// The arguments after the program in a command line that runs `egoexo`: `egoexo …`,
 /// `…/egoexo …` or `cargo run … -p egoexo-cli -- …`; `None` for any other text.
@@ -54,41 +33,12 @@ fn egoexo_args(text: &str) -> Option<Vec<String>> {
     (!args.is_empty()).then_some(args)
 }
 
-/// Every `egoexo` command line of `file`: lines of fenced code blocks (joined across `\`
-/// continuations) and inline code spans.
-fn commands_in(file: &Path) -> Vec<DocCommand> {
-    let text = std::fs::read_to_string(file).unwrap();
-    let mut out = Vec::new();
-    let mut fenced = false;
-    let mut pending: Option<(usize, String)> = None;
-    for (n, line) in text.lines().enumerate() {
-        if line.trim_start().starts_with("```") {
-            fenced = !fenced;
-            continue;
-        }
-        if fenced {
-            let (at, joined) = match pending.take() {
-                Some((at, before)) => (at, format!("{before} {}", line.trim())),
-                None => (n + 1, line.trim().to_string()),
-            };
-            if let Some(head) = joined.strip_suffix('\\') {
-                pending = Some((at, head.to_string()));
-                continue;
-            }
-            if let Some(args) = egoexo_args(&joined) {
-                out.push(DocCommand { file: file.to_path_buf(), line: at, args });
-            }
-        } else {
-            for (i, span) in line.split('`').enumerate() {
-                if i % 2 == 1
-                    && let Some(args) = egoexo_args(span)
-                {
-                    out.push(DocCommand { file: file.to_path_buf(), line: n + 1, args });
-                }
-            }
-        }
-    }
-    out
+/// One `egoexo …` command line of a document.
+#[derive(Debug)]
+struct DocCommand {
+    file: PathBuf,
+    line: usize,
+    args: Vec<String>,
 }
 
 /// What `egoexo <path> --help` says: its subcommands and its flags.
@@ -139,7 +89,10 @@ fn help<'c>(path: &[String], cache: &'c mut BTreeMap<Vec<String>, Option<Help>>)
 #[test]
 fn every_egoexo_flag_in_the_readme_and_docs_exists() {
     let root = workspace_root();
-    let commands: Vec<DocCommand> = documents(&root).iter().flat_map(|f| commands_in(f)).collect();
+    let commands: Vec<DocCommand> = doc_code_lines(&root)
+        .into_iter()
+        .filter_map(|l| egoexo_args(&l.text).map(|args| DocCommand { file: l.file, line: l.line, args }))
+        .collect();
     assert!(commands.len() >= 30, "only {} egoexo command lines found in the docs", commands.len());
     let mut cache = BTreeMap::new();
     let mut wrong = Vec::new();
@@ -154,7 +107,7 @@ fn every_egoexo_flag_in_the_readme_and_docs_exists() {
             }
             path.push(arg.clone());
         }
-        let place = format!("{}:{}", command.file.strip_prefix(&root).unwrap_or(&command.file).display(), command.line);
+        let place = format!("{}:{}", command.file.display(), command.line);
         let Some(first) = command.args.first() else { continue };
         if path.is_empty() && !first.starts_with('-') && !first.starts_with('<') {
             wrong.push(format!("{place}: `egoexo {first}` is no subcommand"));

@@ -2,7 +2,7 @@
 // (`?url=`), or a share link (`#share=`). The bytes go to the worker (which imports them);
 // the address is kept saying what is shown, so that a copied link opens the same thing.
 
-import { fragment_with_time, parse_fragment } from './pkg/egoexo_viewer.js';
+import { WorkerClient, fragment_with_time, parse_fragment } from './pkg/egoexo_viewer.js';
 import { $, clearError, fail, pauseShown, setBusy, setState, showError, showProgress, state } from './page.js';
 import { fetchShare } from './share.js';
 
@@ -34,14 +34,24 @@ async function openArchive(file) {
   const bytes = new Uint8Array(await file.arrayBuffer());
   setSource('', false);
   state.inputBytes = bytes.length;
+  state.notRead = [];
   startJob((client) => client.open_archive(file.name, bytes));
 }
 
-async function openFolder(name, entries) {
-  // entries: [{path, file}] with paths relative to the dropped folder's parent.
+async function openFolder(name, dropped) {
+  // dropped: [{path, file}] with paths relative to the dropped folder's parent. A raw VRS
+  // recording, or a file larger than any session file may be, is left unread (Rust says
+  // which, and why); the session's warnings list them.
+  const notRead = [];
+  const entries = dropped.filter((e) => {
+    const why = WorkerClient.droppedFileNotRead(e.path, e.file.size);
+    if (why) notRead.push(`${e.path}: ${why}`);
+    return !why;
+  });
   const contents = await Promise.all(entries.map(async (e) => new Uint8Array(await e.file.arrayBuffer())));
   setSource('', false);
   state.inputBytes = contents.reduce((n, c) => n + c.length, 0);
+  state.notRead = notRead;
   startJob((client) => client.open_files(name, entries.map((e) => e.path), contents));
 }
 
@@ -53,6 +63,7 @@ export async function openSample() {
     const bytes = new Uint8Array(await fetchOk(new URL(sample.file, SAMPLES_URL)).then((r) => r.arrayBuffer()));
     setSource(fragment_with_time(location.hash.startsWith('#sample') ? location.hash : '#sample', state.pendingTime?.start, state.pendingTime?.end), true);
     state.inputBytes = bytes.length;
+    state.notRead = [];
     startJob((client) => client.open_archive(sample.file.split('/').pop(), bytes));
   } catch (error) {
     fail('Could not load the sample', error.message);
@@ -80,6 +91,7 @@ export async function openUrl(address) {
   }
   state.linkable = true;
   state.inputBytes = bytes.length;
+  state.notRead = [];
   const name = decodeURIComponent(url.pathname.split('/').pop() || 'session.egoexo');
   startJob((client) => client.open_archive(name, bytes));
 }
@@ -100,6 +112,7 @@ export async function openShareLink(share) {
   }
   state.linkable = true;
   state.inputBytes = 0;
+  state.notRead = [];
   state.client.open_share(sealed, share.key);
 }
 

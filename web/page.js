@@ -22,6 +22,7 @@ export const state = {
   linkable: false, // whether the address can say what is shown (sample, ?url=, share)
   pendingTime: null, // where a link asked to open: {start, end}
   inputBytes: 0, // size of the opened file (does the recording fit in a share?)
+  notRead: [], // files of a dropped folder left unread, with why (shown with the session's warnings)
   openedShare: null, // {includes_recording} of a share being shown
   sharedBy: null, // "(shared, made by …)" of the share being shown
   selecting: null, // {id, moment, how} while another participant of a capture is being opened

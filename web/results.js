@@ -87,7 +87,7 @@ export function showSession(s) {
         + (o.world ? `; world: ${o.world}` : '') + (o.fused === false ? ' — not fused' : '')])),
     ['ground truth', s.ground_truth ? 'yes' : 'no'],
   ]);
-  $('session-warnings').replaceChildren(...s.warnings.map((w) => {
+  $('session-warnings').replaceChildren(...[...(state.notRead ?? []), ...s.warnings].map((w) => {
     const li = document.createElement('li');
     li.textContent = w;
     return li;

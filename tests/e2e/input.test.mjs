@@ -2,7 +2,7 @@
 // device folders, cancel, a pool of workers, a worker panic, damaged models, the backend choice.
 
 import assert from 'node:assert/strict';
-import { cpSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
+import { cpSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { describe, test } from 'node:test';
@@ -48,17 +48,28 @@ describe('bad input and failures', () => {
     }
   });
 
-  test('a dropped Aria MPS folder imports and reconstructs', async () => {
+  test('a dropped Aria MPS folder imports and reconstructs; a raw recording beside it is not read', async () => {
+    // The fixture with the wearer's raw recording beside its MPS output, as a recording
+    // folder often is (a real one is gigabytes): the page leaves it unread and says so.
+    const dir = mkdtempSync(join(tmpdir(), 'egoexo-mps-vrs-'));
+    const folder = join(dir, 'aria_mps');
+    cpSync(ARIA_FOLDER, folder, { recursive: true });
+    writeFileSync(join(folder, 'wearer', 'recording.vrs'), Buffer.alloc(4096, 7));
     const app = await openApp(browser(), '?backend=webgl2');
     try {
       await app.waitState('idle');
-      await app.page.setInputFiles('#folder-input', ARIA_FOLDER);
+      await app.page.setInputFiles('#folder-input', folder);
       assert.equal(await app.waitState(['ready', 'error']), 'ready', await app.text('#error-message'));
       assert.match(await app.text('#session-facts'), /multi-device Aria MPS folder/);
       assert.match(await app.text('#frame-count'), /^\d+ frames$/);
+      const warnings = await app.page.$$eval('#session-warnings li', (items) => items.map((li) => li.textContent));
+      assert.ok(warnings.some((w) => /^aria_mps\/wearer\/recording\.vrs: not read \(0\.0 GiB\): a raw Aria recording/.test(w)), JSON.stringify(warnings));
+      // No time_sync.csv in any device folder: the import says which clock it took as shared.
+      assert.ok(warnings.some((w) => w.includes('no device folder has a time_sync.csv')), JSON.stringify(warnings));
       assert.deepEqual(app.errors, []);
     } finally {
       await app.close();
+      rmSync(dir, { recursive: true, force: true });
     }
   });
 

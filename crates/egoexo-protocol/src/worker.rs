@@ -181,6 +181,35 @@ pub struct DroppedFile<B> {
     pub bytes: B,
 }
 
+/// Largest file the page reads from a dropped folder, bytes: the importers' largest file
+/// (`egoexo_session::vfs::Limits::default().max_file_bytes`; a test there keeps the two equal).
+pub const MAX_DROPPED_FILE_BYTES: u64 = 1 << 30;
+
+/// Why the page leaves a file of a dropped folder unread (`path` as in [`DroppedFile`],
+/// `bytes` its size), or `None` to read it: a raw Aria recording (`.vrs`), which no layout
+/// reads — egoexo imports the MPS output beside it, and the RGB video exported from it —
+/// and anything over [`MAX_DROPPED_FILE_BYTES`]. A folder is read into memory before it is
+/// imported, so a multi-gigabyte recording beside the MPS output would otherwise be read whole.
+pub fn dropped_file_not_read(path: &str, bytes: u64) -> Option<String> {
+    let name = path.rsplit('/').next().unwrap_or(path);
+    let gib = |b: u64| b as f64 / f64::from(1u32 << 30);
+    if name.to_ascii_lowercase().ends_with(".vrs") {
+        Some(format!(
+            "not read ({:.1} GiB): a raw Aria recording (VRS), which no layout reads — egoexo imports the MPS output \
+             beside it, and the RGB video exported from it (docs/session-format.md)",
+            gib(bytes)
+        ))
+    } else if bytes > MAX_DROPPED_FILE_BYTES {
+        Some(format!(
+            "not read: {:.1} GiB, over the {:.0} GiB a file of a session may be",
+            gib(bytes),
+            gib(MAX_DROPPED_FILE_BYTES)
+        ))
+    } else {
+        None
+    }
+}
+
 /// A motion file format the worker exports.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -468,6 +497,19 @@ pub enum ErrorKind {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_dropped_folder_leaves_raw_recordings_and_oversized_files_unread() {
+        use super::{MAX_DROPPED_FILE_BYTES, dropped_file_not_read};
+        assert_eq!(dropped_file_not_read("take/wearer/closed_loop_trajectory.csv", 5 << 20), None);
+        assert_eq!(dropped_file_not_read("take/observers/o1/rgb.mp4", MAX_DROPPED_FILE_BYTES), None);
+        let vrs = dropped_file_not_read("take/wearer/recording.VRS", 3 << 30).unwrap();
+        assert!(vrs.starts_with("not read (3.0 GiB): a raw Aria recording"), "{vrs}");
+        // Even a small one: nothing reads it.
+        assert!(dropped_file_not_read("take/a.vrs", 10).is_some());
+        let big = dropped_file_not_read("take/wearer/semidense_points.csv.gz", MAX_DROPPED_FILE_BYTES + 1).unwrap();
+        assert!(big.contains("over the 1 GiB"), "{big}");
+    }
+
     use serde_json::json;
 
     use super::*;

@@ -455,6 +455,11 @@ pub use native::write_dir;
 mod tests {
     use super::*;
 
+    #[test]
+    fn the_page_reads_no_dropped_file_larger_than_an_importer_takes() {
+        assert_eq!(Limits::default().max_file_bytes, egoexo_protocol::worker::MAX_DROPPED_FILE_BYTES);
+    }
+
     fn tree(files: &[(&str, &str)]) -> FileTree {
         FileTree::from_files("t", files.iter().map(|(p, b)| (p.to_string(), b.as_bytes().to_vec())), Limits::default())
             .unwrap()

@@ -54,6 +54,14 @@ impl WorkerClient {
         Ok(job)
     }
 
+    /// Why the page leaves a dropped folder's file unread (`path` relative, `bytes` its size),
+    /// or `undefined` to read it ([`egoexo_protocol::worker::dropped_file_not_read`]).
+    #[wasm_bindgen(js_name = droppedFileNotRead)]
+    pub fn dropped_file_not_read(path: &str, bytes: f64) -> Option<String> {
+        let bytes = if bytes.is_finite() && bytes > 0.0 { bytes as u64 } else { 0 };
+        egoexo_protocol::worker::dropped_file_not_read(path, bytes)
+    }
+
     /// Opens a dropped folder: `paths[i]` (relative, `/`-separated) holds `contents[i]`; the
     /// contents are transferred to the worker. Returns the job number.
     pub fn open_files(

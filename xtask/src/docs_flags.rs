@@ -3,7 +3,7 @@
 //! `egoexo-cli`'s `cli_tests::docs_flags`.
 
 use clap::CommandFactory;
-use egoexo_test_support::{doc_code_lines, workspace_root};
+use egoexo_test_support::{command_words, doc_code_lines, workspace_root};
 
 use crate::Cli;
 
@@ -11,11 +11,7 @@ use crate::Cli;
 fn xtask_args(text: &str) -> Option<Vec<String>> {
     let tokens: Vec<&str> = text.split_whitespace().collect();
     let at = tokens.windows(2).position(|w| w == ["cargo", "xtask"])?;
-    let args: Vec<String> = tokens[at + 2..]
-        .iter()
-        .take_while(|t| !matches!(**t, "&&" | ";" | "|" | "#" | ">" | "2>&1"))
-        .map(|t| t.trim_matches(|c| c == '`' || c == ',' || c == ')').to_string())
-        .collect();
+    let args = command_words(&tokens[at + 2..]);
     (!args.is_empty()).then_some(args)
 }
 

@@ -152,3 +152,14 @@ pub fn doc_code_lines(root: &Path) -> Vec<DocCodeLine> {
     }
     out
 }
+
+/// The words of one command in a doc's code line, from `tokens` (already split on white
+/// space, starting after the program): up to a shell separator, a comment or a redirection,
+/// with backticks and trailing `,` / `)` of the surrounding prose trimmed.
+pub fn command_words(tokens: &[&str]) -> Vec<String> {
+    tokens
+        .iter()
+        .take_while(|t| !matches!(**t, "&&" | ";" | "|" | "#" | ">" | "2>&1"))
+        .map(|t| t.trim_matches(|c| c == '`' || c == ',' || c == ')').to_string())
+        .collect()
+}

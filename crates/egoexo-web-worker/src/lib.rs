@@ -40,6 +40,13 @@ pub mod observe;
 pub mod pool;
 #[cfg(target_arch = "wasm32")]
 mod runtime;
+
+/// A page's time in nanoseconds since the epoch, as JS gives it (an f64), as an integer:
+/// `None` when it is not finite or does not fit an i64 (2^63 is exactly representable; anything
+/// at or beyond it does not fit). The device pages' (WebXR, observer) one conversion.
+pub(crate) fn page_time_ns(ns: f64) -> Option<i64> {
+    (ns.is_finite() && ns.abs() < 9_223_372_036_854_775_808.0).then(|| ns.round() as i64)
+}
 pub mod scene;
 pub mod worker;
 pub mod xr;

@@ -103,10 +103,7 @@ pub fn calibration_message(
 
 /// A page time in nanoseconds since the epoch (an f64 from JS) as an integer.
 fn nanoseconds(ns: f64) -> Result<i64, ObserveError> {
-    if !ns.is_finite() || ns.abs() >= 9.0e18 {
-        return Err(ObserveError::Timestamp(ns));
-    }
-    Ok(ns.round() as i64)
+    crate::page_time_ns(ns).ok_or(ObserveError::Timestamp(ns))
 }
 
 /// The detector of one camera's frames, and the crop that follows the person it finds.

@@ -106,11 +106,7 @@ pub fn session_pose_array(source: XrSource, position: &[f32], orientation: &[f32
 /// Nanoseconds held in a JS number as an `i64` (rounded; a JS number holds epoch nanoseconds
 /// to a fraction of a microsecond).
 fn nanoseconds(ns: f64) -> Result<i64, XrError> {
-    // 2^63 is exactly representable; anything at or beyond it does not fit.
-    if !ns.is_finite() || ns.abs() >= 9_223_372_036_854_775_808.0 {
-        return Err(XrError::Timestamp(ns));
-    }
-    Ok(ns.round() as i64)
+    crate::page_time_ns(ns).ok_or(XrError::Timestamp(ns))
 }
 
 /// The data frame of one pose: the session pose of `source` on its stream's device-local

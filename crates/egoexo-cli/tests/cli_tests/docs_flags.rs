@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use egoexo_test_support::{doc_code_lines, workspace_root};
+use egoexo_test_support::{command_words, doc_code_lines, workspace_root};
 
 use crate::common::egoexo;
 
@@ -25,11 +25,7 @@ fn egoexo_args(text: &str) -> Option<Vec<String>> {
         }
         i + 1
     };
-    let args: Vec<String> = tokens[start..]
-        .iter()
-        .take_while(|t| !matches!(**t, "&&" | ";" | "|" | "#" | ">" | "2>&1"))
-        .map(|t| t.trim_matches(|c| c == '`' || c == ',' || c == ')').to_string())
-        .collect();
+    let args = command_words(&tokens[start..]);
     (!args.is_empty()).then_some(args)
 }
 
